@@ -1,0 +1,1 @@
+"""Ethical trajectory planning after Geisslinger et al. (Nature Machine Intelligence 2023)."""

@@ -1,0 +1,315 @@
+"""Planner configuration: nested frozen dataclasses, TOML loading and presets.
+
+One default configuration; the presets ``ethical``, ``selfish`` and ``standard``
+are small overrides of it (SPEC section 5). Unknown keys in TOML or in overrides
+are rejected with the key's dotted name.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .harm import HarmModel
+
+
+def _check(condition: bool, message: str) -> None:
+    if not condition:
+        raise ValueError(message)
+
+
+def _finite(owner: str, obj: object) -> None:
+    for f in dataclasses.fields(obj):  # type: ignore[arg-type]
+        value = getattr(obj, f.name)
+        if isinstance(value, float | int) and not isinstance(value, bool):
+            _check(math.isfinite(value), f"{owner}.{f.name} must be finite, got {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class SamplingConfig:
+    """Candidate grid (paper Fig. 1 step 1).
+
+    Attributes:
+        n_speeds: number of end speeds per horizon.
+        n_offsets: number of end lateral offsets per horizon.
+        d_min, d_max: range of end lateral offsets from the reference path [m].
+        horizons: planning horizons T [s]; candidates of shorter horizons continue
+            at constant speed and offset up to the longest.
+        dt: time step [s].
+        max_end_acceleration: end speeds span v0 -+ this times T [m/s^2].
+    """
+
+    n_speeds: int = 15
+    n_offsets: int = 15
+    d_min: float = -3.5
+    d_max: float = 3.5
+    horizons: tuple[float, ...] = (2.0,)
+    dt: float = 0.1
+    max_end_acceleration: float = 4.0
+
+    def __post_init__(self) -> None:
+        _finite("sampling", self)
+        _check(self.n_speeds >= 1, "sampling.n_speeds must be >= 1")
+        _check(self.n_offsets >= 1, "sampling.n_offsets must be >= 1")
+        _check(self.d_min <= self.d_max, "sampling.d_min must be <= sampling.d_max")
+        object.__setattr__(self, "horizons", tuple(float(h) for h in self.horizons))
+        _check(len(self.horizons) >= 1, "sampling.horizons must name at least one horizon")
+        _check(self.dt > 0, f"sampling.dt must be > 0 s, got {self.dt}")
+        for horizon in self.horizons:
+            _check(
+                math.isfinite(horizon) and horizon >= self.dt,
+                f"sampling.horizons must be finite and >= dt ({self.dt} s), got {horizon}",
+            )
+        _check(self.max_end_acceleration > 0, "sampling.max_end_acceleration must be > 0")
+
+    @property
+    def n_trajectories(self) -> int:
+        """Number of candidates per planning cycle."""
+        return self.n_speeds * self.n_offsets * len(self.horizons)
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleLimits:
+    """Physical limits of the ego used by validity level 0.
+
+    Attributes:
+        v_max: [m/s]. a_max: [m/s^2]. a_min: most negative acceleration [m/s^2].
+        kappa_max: curvature [1/m], checked above ``kappa_check_speed`` [m/s] (curvature
+            is ill-defined at standstill).
+        emergency_deceleration: used by the emergency-braking fallback [m/s^2].
+    """
+
+    v_max: float = 50.0
+    a_max: float = 5.0
+    a_min: float = -9.0
+    kappa_max: float = 0.2
+    kappa_check_speed: float = 1.0
+    emergency_deceleration: float = 8.0
+
+    def __post_init__(self) -> None:
+        _finite("vehicle", self)
+        _check(self.v_max > 0, "vehicle.v_max must be > 0 m/s")
+        _check(self.a_max > 0 > self.a_min, "vehicle.a_max must be > 0 and vehicle.a_min < 0")
+        _check(self.kappa_max > 0, "vehicle.kappa_max must be > 0 1/m")
+        _check(self.emergency_deceleration > 0, "vehicle.emergency_deceleration must be > 0")
+
+
+@dataclass(frozen=True, slots=True)
+class PredictionConfig:
+    """Constant-turn-rate prediction with a covariance growing over the horizon.
+
+    Standard deviations in the road user's heading frame:
+    sigma_long(t) = sigma0_long + (growth_long + growth_long_per_speed * v) t,
+    sigma_lat(t) = sigma0_lat + growth_lat t; pedestrians use ``pedestrian_growth`` in
+    both directions. Eigenvalues below ``covariance_floor`` [m^2] are raised to it.
+    """
+
+    sigma0_long: float = 0.3
+    sigma0_lat: float = 0.2
+    growth_long: float = 0.3
+    growth_long_per_speed: float = 0.05
+    growth_lat: float = 0.25
+    pedestrian_growth: float = 0.5
+    covariance_floor: float = 0.1
+    use_turn_rate: bool = True
+
+    def __post_init__(self) -> None:
+        _finite("prediction", self)
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, bool):
+                _check(value >= 0, f"prediction.{f.name} must be >= 0, got {value}")
+        _check(self.covariance_floor > 0, "prediction.covariance_floor must be > 0 m^2")
+
+
+@dataclass(frozen=True, slots=True)
+class RiskConfig:
+    """Risk assessment (SPEC section 3).
+
+    Attributes:
+        harm_model: model for protected collision partners.
+        pedestrian_model: model for unprotected partners (pedestrians, cyclists...).
+        gate_sigmas: distance gate of the collision probability [standard deviations].
+        max_acceptable_risk: R_max; a candidate with R_ego or any R_k above it is level 3.
+        boundary_harm: add the harm of hitting a wall when a candidate leaves the road.
+    """
+
+    harm_model: HarmModel = HarmModel.REDUCED_SYM
+    pedestrian_model: HarmModel = HarmModel.PEDESTRIAN_MAIS3
+    gate_sigmas: float = 6.0
+    max_acceptable_risk: float = 0.05
+    boundary_harm: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("harm_model", "pedestrian_model"):
+            value = getattr(self, name)
+            try:
+                object.__setattr__(self, name, HarmModel(value))
+            except ValueError:
+                allowed = ", ".join(m.value for m in HarmModel)
+                raise ValueError(f"risk.{name}: unknown harm model {value!r}; allowed: {allowed}") from None
+        _finite("risk", self)
+        _check(self.gate_sigmas > 0, "risk.gate_sigmas must be > 0")
+        _check(
+            0.0 <= self.max_acceptable_risk <= 1.0,
+            f"risk.max_acceptable_risk must lie in [0, 1], got {self.max_acceptable_risk}",
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class ResponsibilityConfig:
+    """Sources of responsibility r_i (Eq. 11); their sum must stay below 1.
+
+    Attributes:
+        base_max: base responsibility of a motorised road user of infinite mass.
+        base_mass_scale: r_base = base_max (1 - exp(-m / base_mass_scale)) [kg].
+        rule_violation: added when the potential collision lies outside the road
+            user's legal reachable set.
+        rear_end: added to the follower of a rear-end collision.
+    """
+
+    base_max: float = 0.1
+    base_mass_scale: float = 5000.0
+    rule_violation: float = 0.5
+    rear_end: float = 0.3
+
+    def __post_init__(self) -> None:
+        _finite("responsibility", self)
+        _check(
+            min(self.base_max, self.rule_violation, self.rear_end) >= 0,
+            "responsibility.base_max, rule_violation and rear_end must be >= 0",
+        )
+        _check(self.base_mass_scale > 0, "responsibility.base_mass_scale must be > 0 kg")
+        total = self.base_max + self.rule_violation + self.rear_end
+        _check(
+            total < 1.0,
+            "responsibility.base_max + rule_violation + rear_end must be < 1 so that no "
+            f"road user's risk is ignored entirely (r_i = 1), got {total:g}",
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class CostWeights:
+    """Weights of Eqs. 5-11 and of comfort and mobility.
+
+    Attributes:
+        risk: w_risk of Eq. 5.
+        bayes, equality, maximin: w_B, w_E, w_M of Eq. 7.
+        responsibility: fraction rho of w_B applied to J_R (Eq. 7 has rho = 1).
+        ego_risk: weight of the ego's combined risk (the selfish planner's only term).
+        maximin_gamma: discount exponent gamma >= 1 of Eq. 10.
+        maximin_epsilon: collision probability above which a harm counts for maximin.
+        jerk_lon, jerk_lat: weights of integrated squared jerk [per m^2/s^5].
+        speed: weight of the mean |v - v_desired| [per m/s].
+        path_distance: weight of the mean |d| from the reference path [per m].
+    """
+
+    risk: float = 250.0
+    bayes: float = 33.3
+    equality: float = 33.3
+    maximin: float = 33.3
+    responsibility: float = 0.0
+    ego_risk: float = 0.0
+    maximin_gamma: float = 10.0
+    maximin_epsilon: float = 1e-3
+    jerk_lon: float = 0.05
+    jerk_lat: float = 0.05
+    speed: float = 1.0
+    path_distance: float = 10.0
+
+    def __post_init__(self) -> None:
+        _finite("weights", self)
+        for f in dataclasses.fields(self):
+            _check(getattr(self, f.name) >= 0, f"weights.{f.name} must be >= 0")
+        _check(self.maximin_gamma >= 1, "weights.maximin_gamma must be >= 1 (Eq. 10)")
+        _check(self.responsibility <= 1, "weights.responsibility must lie in [0, 1]")
+
+
+@dataclass(frozen=True, slots=True)
+class PlannerConfig:
+    """Everything a planning cycle needs besides the scene.
+
+    Attributes:
+        name: preset name shown in decision records.
+        desired_speed: [m/s]; None uses the road's speed limit.
+    """
+
+    name: str = "ethical"
+    desired_speed: float | None = None
+    sampling: SamplingConfig = field(default_factory=SamplingConfig)
+    vehicle: VehicleLimits = field(default_factory=VehicleLimits)
+    prediction: PredictionConfig = field(default_factory=PredictionConfig)
+    risk: RiskConfig = field(default_factory=RiskConfig)
+    responsibility: ResponsibilityConfig = field(default_factory=ResponsibilityConfig)
+    weights: CostWeights = field(default_factory=CostWeights)
+
+    def __post_init__(self) -> None:
+        if self.desired_speed is not None:
+            _check(
+                math.isfinite(self.desired_speed) and self.desired_speed >= 0,
+                f"desired_speed must be a finite speed >= 0 m/s, got {self.desired_speed}",
+            )
+
+    def with_overrides(self, overrides: dict[str, Any]) -> PlannerConfig:
+        """Return a copy with nested ``overrides`` applied (unknown keys rejected)."""
+        return _apply(self, overrides, prefix="")
+
+
+def _apply(obj: Any, overrides: dict[str, Any], prefix: str) -> Any:
+    if not isinstance(overrides, dict):
+        raise ValueError(f"{prefix.rstrip('.') or 'config'} must be a table of keys")
+    known = {f.name: f for f in dataclasses.fields(obj)}
+    changes: dict[str, Any] = {}
+    for key, value in overrides.items():
+        if key not in known:
+            allowed = ", ".join(sorted(known))
+            raise ValueError(f"unknown configuration key {prefix}{key!r}; allowed here: {allowed}")
+        current = getattr(obj, key)
+        if dataclasses.is_dataclass(current):
+            changes[key] = _apply(current, value, prefix=f"{prefix}{key}.")
+        elif isinstance(current, tuple):
+            changes[key] = tuple(value) if isinstance(value, list | tuple) else (value,)
+        else:
+            changes[key] = value
+    try:
+        return dataclasses.replace(obj, **changes)
+    except TypeError as error:
+        raise ValueError(f"bad value in {prefix.rstrip('.') or 'config'}: {error}") from None
+
+
+#: The presets as small overrides of the default (SPEC section 5).
+PRESET_OVERRIDES: dict[str, dict[str, Any]] = {
+    "ethical": {},
+    "selfish": {
+        "name": "selfish",
+        "weights": {"bayes": 0.0, "equality": 0.0, "maximin": 0.0, "ego_risk": 100.0},
+    },
+    "standard": {
+        "name": "standard",
+        "weights": {"risk": 0.0, "bayes": 0.0, "equality": 0.0, "maximin": 0.0},
+    },
+    "ethical_responsible": {"name": "ethical_responsible", "weights": {"responsibility": 0.5}},
+}
+
+
+def preset(name: str) -> PlannerConfig:
+    """Return the configuration of a named preset.
+
+    Raises:
+        ValueError: for an unknown name (the message lists the presets).
+    """
+    if name not in PRESET_OVERRIDES:
+        raise ValueError(f"unknown planner preset {name!r}; allowed: {', '.join(PRESET_OVERRIDES)}")
+    return PlannerConfig().with_overrides(PRESET_OVERRIDES[name])
+
+
+def load_config(path: str | Path, base: str = "ethical") -> PlannerConfig:
+    """Load a TOML file of overrides on top of the preset ``base`` (key ``preset`` wins)."""
+    with open(path, "rb") as handle:
+        data = tomllib.load(handle)
+    base = data.pop("preset", base)
+    return preset(base).with_overrides(data)

@@ -1,0 +1,402 @@
+"""One planning cycle (paper Fig. 1) and its decision record.
+
+sample -> predict -> assess risk -> responsibility -> validity levels -> cost ->
+choose the cheapest candidate of the highest available level. Every cycle returns a
+``Decision`` that says what was chosen and why, in numbers a person can check.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .config import PlannerConfig
+from .cost import CostBreakdown, total_cost
+from .environment import RoadEnvironment
+from .prediction import Prediction, predict_constant_turn_rate
+from .responsibility import LegalCorridors, responsibilities
+from .risk import RiskAssessment, assess_risk
+from .road_users import EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser, RoadUserType, Shape
+from .sampling import Candidates, emergency_braking, frenet_state, sample_candidates
+from .validity import Validity, physically_invalid, validity_levels
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Trajectory:
+    """The executed plan: arrays of shape (n_t,), t[0] = 0 at the planning state.
+
+    Attributes:
+        t: [s]. x, y: ego centre [m]. yaw: [rad]. v: [m/s]. a: [m/s^2]. kappa: [1/m].
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    yaw: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    kappa: np.ndarray
+
+    @classmethod
+    def from_candidates(cls, candidates: Candidates, index: int) -> Trajectory:
+        """Copy candidate ``index`` out of the struct of arrays."""
+        return cls(
+            candidates.t.copy(),
+            *(getattr(candidates, name)[index].copy() for name in ("x", "y", "yaw", "v", "a", "kappa")),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class RoadUserAssessment:
+    """What the chosen plan means for one road user.
+
+    Attributes:
+        id, type: the road user.
+        risk: R_k of the chosen plan (max over the horizon of p H).
+        ego_risk: R_ego,k, the ego's risk in a collision with it.
+        collision_probability: highest p_k(t) along the plan.
+        harm: its harm at the step of the highest collision probability.
+        ego_harm: the ego's harm at that step.
+        responsibility: r_k.
+        ego_responsibility: the ego's responsibility for R_ego,k.
+    """
+
+    id: int
+    type: RoadUserType
+    risk: float
+    ego_risk: float
+    collision_probability: float
+    harm: float
+    ego_harm: float
+    responsibility: float
+    ego_responsibility: float
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Decision:
+    """Readable record of one planning cycle.
+
+    Attributes:
+        planner: preset name.
+        trajectory: the chosen plan.
+        chosen_index: index of the chosen candidate, -1 for emergency braking.
+        level: validity level of the chosen plan.
+        level_counts: candidates per validity level.
+        invalid_counts: physically invalid candidates per broken limit.
+        reason: why this candidate.
+        emergency: True if the emergency-braking fallback was taken.
+        ego_combined_risk: R_ego of the plan (Eq. 4).
+        boundary_risk: the ego's risk of leaving the road on the plan.
+        max_acceptable_risk: R_max in force.
+        costs: every cost term of the plan (Eqs. 5-11).
+        road_users: per road user, in the order given.
+        timings_ms: wall time per stage [ms].
+        candidate_x, candidate_y: all candidates [m], shape (n, n_t), for display.
+        candidate_levels: their validity levels, shape (n,).
+        prediction: the prediction used.
+    """
+
+    planner: str
+    trajectory: Trajectory
+    chosen_index: int
+    level: int
+    level_counts: dict[int, int]
+    invalid_counts: dict[str, int]
+    reason: str
+    emergency: bool
+    ego_combined_risk: float
+    boundary_risk: float
+    max_acceptable_risk: float
+    costs: dict[str, float]
+    road_users: tuple[RoadUserAssessment, ...]
+    timings_ms: dict[str, float]
+    candidate_x: np.ndarray = field(repr=False)
+    candidate_y: np.ndarray = field(repr=False)
+    candidate_levels: np.ndarray = field(repr=False)
+    prediction: Prediction = field(repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary (no candidate arrays)."""
+        return {
+            "planner": self.planner,
+            "chosen_index": self.chosen_index,
+            "level": self.level,
+            "level_counts": {str(k): v for k, v in self.level_counts.items()},
+            "invalid_counts": dict(self.invalid_counts),
+            "reason": self.reason,
+            "emergency": self.emergency,
+            "ego_combined_risk": self.ego_combined_risk,
+            "boundary_risk": self.boundary_risk,
+            "max_acceptable_risk": self.max_acceptable_risk,
+            "costs": dict(self.costs),
+            "road_users": [
+                {
+                    name: (getattr(u, name).value if name == "type" else getattr(u, name))
+                    for name in RoadUserAssessment.__slots__
+                }
+                for u in self.road_users
+            ],
+            "timings_ms": dict(self.timings_ms),
+            "end_speed": float(self.trajectory.v[-1]),
+        }
+
+    def summary(self) -> str:
+        """Multi-line text a person reads: choice, reason, costs, per-road-user risk."""
+        counts = ", ".join(f"L{k}: {v}" for k, v in sorted(self.level_counts.items(), reverse=True))
+        lines = [
+            f"[{self.planner}] level {self.level} ({Validity(self.level).name.lower()}), "
+            f"candidate {self.chosen_index}; {counts}",
+            f"  why: {self.reason}",
+            f"  ego risk {self.ego_combined_risk:.4f} (R_max {self.max_acceptable_risk:g}), "
+            f"boundary {self.boundary_risk:.4f}",
+            "  costs: " + ", ".join(f"{k} {v:.4g}" for k, v in self.costs.items()),
+        ]
+        for u in self.road_users:
+            lines.append(
+                f"  #{u.id} {u.type.value:<10} p {u.collision_probability:.4f} "
+                f"harm {u.harm:.3f} risk {u.risk:.5f} | ego harm {u.ego_harm:.3f} "
+                f"ego risk {u.ego_risk:.5f} | r {u.responsibility:.2f}/{u.ego_responsibility:.2f}"
+            )
+        lines.append("  time: " + ", ".join(f"{k} {v:.2f} ms" for k, v in self.timings_ms.items()))
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Evaluation:
+    candidates: Candidates
+    risk: RiskAssessment
+    r_obs: np.ndarray
+    r_ego: np.ndarray
+    levels: np.ndarray
+    invalid: dict[str, np.ndarray]
+    costs: CostBreakdown
+
+
+class Planner:
+    """Ethical Frenet sampling planner.
+
+    Args:
+        config: weights, limits and grid (see ``preset``).
+        environment: the road.
+        ego_shape: footprint of the ego [m].
+        ego_mass: [kg].
+    """
+
+    def __init__(
+        self,
+        config: PlannerConfig,
+        environment: RoadEnvironment,
+        ego_shape: Shape = EGO_SHAPE,
+        ego_mass: float = EGO_MASS_KG,
+    ) -> None:
+        if not isinstance(config, PlannerConfig):
+            raise ValueError("config must be a PlannerConfig (see ethical_planner.preset)")
+        if not isinstance(environment, RoadEnvironment):
+            raise ValueError("environment must be a RoadEnvironment")
+        if not isinstance(ego_shape, Shape):
+            raise ValueError("ego_shape must be a Shape")
+        if not (math.isfinite(ego_mass) and ego_mass > 0):
+            raise ValueError(f"ego_mass must be a finite mass > 0 kg, got {ego_mass}")
+        self.config = config
+        self.environment = environment
+        self.ego_shape = ego_shape
+        self.ego_mass = float(ego_mass)
+        self.desired_speed = (
+            config.desired_speed if config.desired_speed is not None else environment.speed_limit
+        )
+
+    def _evaluate(
+        self,
+        candidates: Candidates,
+        prediction: Prediction,
+        corridors: LegalCorridors,
+        timings: dict[str, float],
+    ) -> _Evaluation:
+        config = self.config
+        clock = time.perf_counter()
+        risk = assess_risk(
+            candidates, prediction, self.ego_shape, self.ego_mass, self.environment, config.risk
+        )
+        timings["risk"] = timings.get("risk", 0.0) + _since(clock)
+        clock = time.perf_counter()
+        r_obs, r_ego = responsibilities(
+            candidates, risk.probability, prediction, corridors, self.ego_shape,
+            self.ego_mass, config.responsibility,
+        )
+        timings["responsibility"] = timings.get("responsibility", 0.0) + _since(clock)
+        clock = time.perf_counter()
+        invalid = physically_invalid(candidates, config.vehicle)
+        levels = validity_levels(
+            invalid, risk.mean_overlap, risk.outside_road, risk.risk_obs, risk.ego_combined,
+            config.risk.max_acceptable_risk,
+        )
+        timings["validity"] = timings.get("validity", 0.0) + _since(clock)
+        clock = time.perf_counter()
+        n = candidates.n_traj
+        risks = np.concatenate([risk.risk_obs, risk.risk_ego, risk.boundary_risk[:, None]], axis=1)
+        r = np.concatenate([r_obs, r_ego, np.zeros((n, 1))], axis=1)
+        counted_p = risk.probability > config.weights.maximin_epsilon
+        harms = np.concatenate(
+            [
+                np.where(counted_p, risk.harm_obs, 0.0).max(axis=2, initial=0.0),
+                np.where(counted_p, risk.harm_ego, 0.0).max(axis=2, initial=0.0),
+                risk.boundary_risk[:, None],
+            ],
+            axis=1,
+        )
+        counted = np.concatenate(
+            [counted_p.any(axis=2), counted_p.any(axis=2), risk.outside_road.any(axis=1)[:, None]],
+            axis=1,
+        )
+        costs = total_cost(
+            risks, r, harms, counted, risk.ego_combined, candidates.jerk_lon, candidates.jerk_lat,
+            np.abs(candidates.v - self.desired_speed).mean(axis=1),
+            np.abs(candidates.d).mean(axis=1),
+            levels, config.weights,
+        )
+        timings["cost"] = timings.get("cost", 0.0) + _since(clock)
+        return _Evaluation(candidates, risk, r_obs, r_ego, levels, invalid, costs)
+
+    def plan(
+        self,
+        ego_state: KinematicState,
+        road_users: Sequence[RoadUser],
+        prediction: Prediction | None = None,
+    ) -> Decision:
+        """Run one planning cycle.
+
+        Args:
+            ego_state: current state of the ego's centre.
+            road_users: every other road user the ego perceives (may be empty).
+            prediction: a prediction on the planner's time grid; by default the
+                constant-turn-rate predictor of ``config.prediction``.
+
+        Returns:
+            The decision; never None. If every candidate is physically invalid, the
+            plan is emergency braking.
+        """
+        if not isinstance(ego_state, KinematicState):
+            raise ValueError("ego_state must be a KinematicState")
+        config = self.config
+        timings: dict[str, float] = {}
+        start_clock = clock = time.perf_counter()
+        start = frenet_state(ego_state, self.environment.reference_path)
+        candidates = sample_candidates(
+            start, self.environment.reference_path, config.sampling, config.vehicle.v_max
+        )
+        timings["sampling"] = _since(clock)
+        clock = time.perf_counter()
+        if prediction is None:
+            prediction = predict_constant_turn_rate(road_users, candidates.t, config.prediction)
+        elif prediction.mean.shape[1] != len(candidates.t):
+            raise ValueError(
+                f"prediction has {prediction.mean.shape[1]} steps; the planner needs "
+                f"{len(candidates.t)} (horizon {max(config.sampling.horizons)} s, dt {config.sampling.dt} s)"
+            )
+        else:
+            prediction = prediction.with_covariance_floor(config.prediction.covariance_floor)
+        if len(road_users) != prediction.n_obs:
+            raise ValueError(
+                f"prediction covers {prediction.n_obs} road users but {len(road_users)} were given"
+            )
+        corridors = LegalCorridors.of(road_users, self.environment)
+        timings["prediction"] = _since(clock)
+
+        grid = self._evaluate(candidates, prediction, corridors, timings)
+        clock = time.perf_counter()
+        best_level = int(grid.levels.max())
+        index, reason = self._choose(grid, best_level)
+        chosen = grid
+        emergency = False
+        if best_level == Validity.PHYSICALLY_INVALID:
+            brake = emergency_braking(
+                start, self.environment.reference_path, candidates.t,
+                config.vehicle.emergency_deceleration,
+            )
+            chosen = self._evaluate(brake, prediction, corridors, timings)
+            index, emergency = 0, True
+            reason = (
+                "emergency braking: every sampled candidate breaks a physical limit ("
+                + ", ".join(f"{k} {int(v.sum())}" for k, v in grid.invalid.items())
+                + ")"
+            )
+        timings["selection"] = _since(clock)
+        timings["total"] = _since(start_clock)
+        return self._record(grid, chosen, index, reason, emergency, prediction, road_users, timings)
+
+    def _choose(self, grid: _Evaluation, best_level: int) -> tuple[int, str]:
+        """Cheapest candidate of the highest level; comfort and mobility break ties."""
+        in_level = np.flatnonzero(grid.levels == best_level)
+        costs = grid.costs
+        secondary = costs.comfort[in_level] + costs.mobility[in_level]
+        order = np.lexsort((secondary, costs.total[in_level]))
+        index = int(in_level[order[0]])
+        name = Validity(best_level).name.lower().replace("_", " ")
+        if best_level == Validity.VALID:
+            reason = f"lowest total cost (Eq. 5) among {len(in_level)} valid candidates"
+        else:
+            reason = (
+                f"no valid candidate; highest available level is {best_level} ({name}); "
+                f"lowest risk cost (Eq. 6) among its {len(in_level)} candidates"
+            )
+        return index, reason
+
+    def _record(
+        self,
+        grid: _Evaluation,
+        chosen: _Evaluation,
+        index: int,
+        reason: str,
+        emergency: bool,
+        prediction: Prediction,
+        road_users: Sequence[RoadUser],
+        timings: dict[str, float],
+    ) -> Decision:
+        risk = chosen.risk
+        p = risk.probability[index]  # (k, t)
+        peak = p.argmax(axis=1) if p.shape[1] else np.zeros(p.shape[0], dtype=int)
+        rows = np.arange(p.shape[0])
+        assessments = tuple(
+            RoadUserAssessment(
+                id=int(prediction.ids[k]),
+                type=prediction.types[k],
+                risk=float(risk.risk_obs[index, k]),
+                ego_risk=float(risk.risk_ego[index, k]),
+                collision_probability=float(p[k].max(initial=0.0)),
+                harm=float(risk.harm_obs[index, k, peak[k]]),
+                ego_harm=float(risk.harm_ego[index, k, peak[k]]),
+                responsibility=float(chosen.r_obs[index, k]),
+                ego_responsibility=float(chosen.r_ego[index, k]),
+            )
+            for k in rows
+        )
+        values, counts = np.unique(grid.levels, return_counts=True)
+        return Decision(
+            planner=self.config.name,
+            trajectory=Trajectory.from_candidates(chosen.candidates, index),
+            chosen_index=-1 if emergency else index,
+            level=int(chosen.levels[index]),
+            level_counts={int(v): int(c) for v, c in zip(values, counts, strict=True)},
+            invalid_counts={k: int(v.sum()) for k, v in grid.invalid.items()},
+            reason=reason,
+            emergency=emergency,
+            ego_combined_risk=float(risk.ego_combined[index]),
+            boundary_risk=float(risk.boundary_risk[index]),
+            max_acceptable_risk=self.config.risk.max_acceptable_risk,
+            costs=chosen.costs.row(index),
+            road_users=assessments,
+            timings_ms={k: round(v, 3) for k, v in timings.items()},
+            candidate_x=grid.candidates.x,
+            candidate_y=grid.candidates.y,
+            candidate_levels=grid.levels,
+            prediction=prediction,
+        )
+
+
+def _since(clock: float) -> float:
+    return (time.perf_counter() - clock) * 1e3

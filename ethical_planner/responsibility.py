@@ -1,0 +1,183 @@
+"""Responsibility r_i of road users for potential collisions (paper Eq. 11).
+
+Three sources, added and kept below 1 by ``ResponsibilityConfig``:
+
+1. base: motorised road users bring risk into traffic in proportion to their mass,
+   r_base = base_max (1 - exp(-m / base_mass_scale)); pedestrians and cyclists get 0;
+2. traffic rules: if the potential collision lies outside road user k's legal
+   reachable set (its ``LegalCorridor``: braking to accelerating up to its speed
+   limit, staying in its lane, stopping at a stop line), k is responsible;
+3. rear-end: the follower of a rear-end collision is responsible.
+
+The collision geometry is taken at the step of the highest collision probability.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import ResponsibilityConfig
+from .environment import RoadEnvironment
+from .harm import impact_angles
+from .prediction import Prediction
+from .road_users import LegalCorridor, RoadUser, RoadUserType, Shape
+from .sampling import Candidates
+
+_FRONT = np.pi / 4
+_REAR = 3 * np.pi / 4
+
+#: Legal speed [m/s] and lateral freedom [m] of road users without a given corridor.
+_DEFAULT_VRU_CORRIDOR = {
+    RoadUserType.PEDESTRIAN: (2.5, 1.5),
+    RoadUserType.BICYCLE: (8.0, 1.0),
+}
+
+
+def default_corridor(user: RoadUser, environment: RoadEnvironment) -> LegalCorridor:
+    """Legal corridor of a road user that the scene does not describe further.
+
+    Vehicles may keep within their lane at the road's speed limit; pedestrians and
+    cyclists get a walking or cycling speed and a small lateral freedom.
+    """
+    if user.legal is not None:
+        return user.legal
+    if user.type in _DEFAULT_VRU_CORRIDOR:
+        speed, lateral = _DEFAULT_VRU_CORRIDOR[user.type]
+        return LegalCorridor(speed_limit=speed, lateral_half_width=lateral)
+    lateral = max(0.0, 0.5 * (environment.lane_width - user.shape.width)) + 0.3
+    return LegalCorridor(speed_limit=environment.speed_limit, lateral_half_width=lateral)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LegalCorridors:
+    """Legal corridors of all road users as arrays, shape (k,) each."""
+
+    x0: np.ndarray
+    y0: np.ndarray
+    yaw0: np.ndarray
+    v0: np.ndarray
+    speed_limit: np.ndarray
+    lateral_half_width: np.ndarray
+    stop_distance: np.ndarray  # inf where there is no stop line
+    max_acceleration: np.ndarray
+    max_deceleration: np.ndarray
+
+    @classmethod
+    def of(cls, users: Sequence[RoadUser], environment: RoadEnvironment) -> LegalCorridors:
+        """Collect the corridors of ``users`` (defaults from the road where not given)."""
+        corridors = [default_corridor(u, environment) for u in users]
+
+        def arr(values: list[float]) -> np.ndarray:
+            return np.asarray(values, dtype=float).reshape(len(users))
+
+        return cls(
+            x0=arr([u.state.x for u in users]),
+            y0=arr([u.state.y for u in users]),
+            yaw0=arr([u.state.yaw for u in users]),
+            v0=arr([abs(u.state.v) for u in users]),
+            speed_limit=arr([c.speed_limit for c in corridors]),
+            lateral_half_width=arr([c.lateral_half_width for c in corridors]),
+            stop_distance=arr(
+                [np.inf if c.stop_distance is None else c.stop_distance for c in corridors]
+            ),
+            max_acceleration=arr([c.max_acceleration for c in corridors]),
+            max_deceleration=arr([c.max_deceleration for c in corridors]),
+        )
+
+    def longitudinal_bounds(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Legal travel along the initial heading after time ``t`` [s] (broadcast with (k,)).
+
+        Returns:
+            (lowest, highest) distance [m]: full braking, and accelerating up to the
+            speed limit (a road user already above the limit may legally travel only
+            at the limit), capped by a stop line.
+        """
+        v0, limit = self.v0, self.speed_limit
+        b, acc = self.max_deceleration, np.maximum(self.max_acceleration, 1e-9)
+        t_stop = v0 / b
+        lowest = np.where(t < t_stop, v0 * t - 0.5 * b * t**2, v0**2 / (2 * b))
+        v_start = np.minimum(v0, limit)
+        t_reach = (limit - v_start) / acc
+        highest = np.where(
+            t < t_reach,
+            v_start * t + 0.5 * acc * t**2,
+            v_start * t_reach + 0.5 * acc * t_reach**2 + limit * (t - t_reach),
+        )
+        return lowest, np.minimum(highest, self.stop_distance)
+
+
+def base_responsibility(mass: np.ndarray, motorised: np.ndarray, config: ResponsibilityConfig) -> np.ndarray:
+    """r_base = base_max (1 - exp(-m / scale)) for motorised road users, else 0."""
+    return np.where(motorised, config.base_max * (1.0 - np.exp(-np.asarray(mass) / config.base_mass_scale)), 0.0)
+
+
+def responsibilities(
+    candidates: Candidates,
+    probability: np.ndarray,
+    prediction: Prediction,
+    corridors: LegalCorridors,
+    ego_shape: Shape,
+    ego_mass: float,
+    config: ResponsibilityConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Responsibility of each road user and of the ego for each potential collision.
+
+    Args:
+        candidates: n candidates.
+        probability: p_k(u, t), shape (n, k, t).
+        prediction: k road users.
+        corridors: their legal corridors.
+        ego_shape, ego_mass: the ego's footprint and mass [kg].
+        config: magnitudes.
+
+    Returns:
+        (r_obs, r_ego), shape (n, k) each: responsibility of road user k for the risk
+        it runs, and of the ego for the risk it runs in a collision with k.
+    """
+    n, k, _ = probability.shape
+    base_obs = np.broadcast_to(
+        base_responsibility(prediction.mass, prediction.motorised, config), (n, k)
+    )
+    base_ego = np.full((n, k), float(base_responsibility(np.array(ego_mass), np.array(True), config)))
+    r_obs, r_ego = base_obs, base_ego
+    if k == 0:
+        return r_obs, r_ego
+    step = probability.argmax(axis=2)  # (n, k)
+    rows = np.arange(n)[:, None]
+    ex, ey, eyaw = candidates.x[rows, step], candidates.y[rows, step], candidates.yaw[rows, step]
+    obs = np.arange(k)[None, :]
+    ox, oy = prediction.mean[obs, step, 0], prediction.mean[obs, step, 1]
+    oyaw = prediction.heading[obs, step]
+
+    # Rear-end: same direction of travel, one body's front meets the other's rear.
+    ego_angle, obs_angle = impact_angles(ex, ey, eyaw, ox, oy, oyaw)
+    same_direction = np.abs(np.angle(np.exp(1j * (eyaw - oyaw)))) < _FRONT
+    ego_follows = same_direction & (np.abs(ego_angle) < _FRONT) & (np.abs(obs_angle) > _REAR)
+    obs_follows = same_direction & (np.abs(obs_angle) < _FRONT) & (np.abs(ego_angle) > _REAR)
+    r_ego = r_ego + np.where(ego_follows, config.rear_end, 0.0)
+    r_obs = r_obs + np.where(obs_follows, config.rear_end, 0.0)
+
+    # Traffic rules: can k legally be where it would have to be to collide?
+    c0, s0 = np.cos(corridors.yaw0), np.sin(corridors.yaw0)
+    dx, dy = ex - corridors.x0, ey - corridors.y0
+    lon = dx * c0 + dy * s0
+    lat = -dx * s0 + dy * c0
+    rel = eyaw - corridors.yaw0
+    half_lon = 0.5 * (np.abs(ego_shape.length * np.cos(rel)) + np.abs(ego_shape.width * np.sin(rel)))
+    half_lat = 0.5 * (np.abs(ego_shape.length * np.sin(rel)) + np.abs(ego_shape.width * np.cos(rel)))
+    lowest, highest = corridors.longitudinal_bounds(candidates.t[step])
+    reach_lon = 0.5 * prediction.length
+    legal = (
+        (lon - half_lon <= highest + reach_lon)
+        & (lon + half_lon >= lowest - reach_lon)
+        & (np.abs(lat) - half_lat <= corridors.lateral_half_width + 0.5 * prediction.width)
+    )
+    r_obs = r_obs + np.where(legal, 0.0, config.rule_violation)
+    # Without any chance of collision there is nothing to be responsible for beyond the base.
+    possible = probability.max(axis=2) > 0.0
+    r_obs = np.where(possible, r_obs, base_obs)
+    r_ego = np.where(possible, r_ego, base_ego)
+    return r_obs, r_ego

@@ -1,0 +1,238 @@
+"""Road-user records: types, shapes, kinematic states and masses.
+
+Everything here is a frozen record validated at construction, so a NaN or a
+negative size is rejected where it enters the planner, not deep in a cost.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import numpy as np
+
+
+class RoadUserType(StrEnum):
+    """Type of a road user, spelled as in CommonRoad's obstacle types."""
+
+    CAR = "car"
+    TAXI = "taxi"
+    PARKED_VEHICLE = "parked_vehicle"
+    PRIORITY_VEHICLE = "priority_vehicle"
+    TRUCK = "truck"
+    BUS = "bus"
+    MOTORCYCLE = "motorcycle"
+    BICYCLE = "bicycle"
+    PEDESTRIAN = "pedestrian"
+    TRAIN = "train"
+
+    @classmethod
+    def parse(cls, value: str | RoadUserType) -> RoadUserType:
+        """Return the type named by ``value`` or raise a ValueError listing the allowed names."""
+        try:
+            return cls(value)
+        except ValueError:
+            allowed = ", ".join(t.value for t in cls)
+            raise ValueError(
+                f"unknown road-user type {value!r}; allowed: {allowed}"
+            ) from None
+
+
+#: Road users without a crash structure around them (paper: unprotected).
+UNPROTECTED_TYPES = frozenset(
+    {RoadUserType.PEDESTRIAN, RoadUserType.BICYCLE, RoadUserType.MOTORCYCLE}
+)
+#: Vulnerable road users, the third group of the paper's Figs. 5 and 6.
+VULNERABLE_TYPES = UNPROTECTED_TYPES
+#: Road users with an engine; they carry a base responsibility growing with mass.
+MOTORISED_TYPES = frozenset(set(RoadUserType) - {RoadUserType.PEDESTRIAN, RoadUserType.BICYCLE})
+
+_CAR_LIKE = frozenset(
+    {
+        RoadUserType.CAR,
+        RoadUserType.TAXI,
+        RoadUserType.PARKED_VEHICLE,
+        RoadUserType.PRIORITY_VEHICLE,
+    }
+)
+_FIXED_MASS_KG = {
+    RoadUserType.TRUCK: 25000.0,
+    RoadUserType.BUS: 13000.0,
+    RoadUserType.MOTORCYCLE: 250.0,
+    RoadUserType.BICYCLE: 90.0,
+    RoadUserType.PEDESTRIAN: 75.0,
+    RoadUserType.TRAIN: 118800.0,
+}
+#: Floor of the car mass regression [kg]; the regression is negative below 3.19 m^2.
+MIN_CAR_MASS_KG = 500.0
+
+
+def mass_of(kind: RoadUserType, length: float, width: float) -> float:
+    """Mass of a road user [kg] from its type and footprint (reference regression).
+
+    Cars: m = -1333.5 + 526.9 (l w)^0.8, floored at ``MIN_CAR_MASS_KG``.
+
+    Args:
+        kind: road-user type.
+        length: footprint length [m].
+        width: footprint width [m].
+    """
+    if kind in _CAR_LIKE:
+        return max(MIN_CAR_MASS_KG, -1333.5 + 526.9 * (length * width) ** 0.8)
+    return _FIXED_MASS_KG[kind]
+
+
+def _require_finite(owner: str, **values: float) -> None:
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise ValueError(f"{owner}.{name} must be a finite number, got {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class Shape:
+    """Rectangular footprint [m]; pedestrians are approximated by a small square."""
+
+    length: float
+    width: float
+
+    def __post_init__(self) -> None:
+        _require_finite("Shape", length=self.length, width=self.width)
+        if self.length <= 0 or self.width <= 0:
+            raise ValueError(
+                f"Shape.length and Shape.width must be > 0 m, got {self.length} x {self.width}"
+            )
+
+
+#: Default shapes [m] used when a scenario gives only a type.
+DEFAULT_SHAPES = {
+    RoadUserType.CAR: Shape(4.5, 1.8),
+    RoadUserType.TAXI: Shape(4.5, 1.8),
+    RoadUserType.PARKED_VEHICLE: Shape(4.5, 1.8),
+    RoadUserType.PRIORITY_VEHICLE: Shape(5.0, 2.0),
+    RoadUserType.TRUCK: Shape(10.0, 2.5),
+    RoadUserType.BUS: Shape(12.0, 2.5),
+    RoadUserType.MOTORCYCLE: Shape(2.2, 0.8),
+    RoadUserType.BICYCLE: Shape(1.8, 0.6),
+    RoadUserType.PEDESTRIAN: Shape(0.5, 0.5),
+    RoadUserType.TRAIN: Shape(40.0, 3.0),
+}
+
+#: Default ego: BMW 320i.
+EGO_SHAPE = Shape(4.508, 1.610)
+EGO_MASS_KG = 1475.0
+
+
+@dataclass(frozen=True, slots=True)
+class KinematicState:
+    """Planar state of a body's geometric centre.
+
+    Attributes:
+        x: position [m].
+        y: position [m].
+        yaw: heading [rad], counter-clockwise from the x axis.
+        v: speed along the heading [m/s].
+        a: longitudinal acceleration [m/s^2].
+        yaw_rate: [rad/s].
+    """
+
+    x: float
+    y: float
+    yaw: float
+    v: float
+    a: float = 0.0
+    yaw_rate: float = 0.0
+
+    def __post_init__(self) -> None:
+        _require_finite(
+            "KinematicState",
+            x=self.x,
+            y=self.y,
+            yaw=self.yaw,
+            v=self.v,
+            a=self.a,
+            yaw_rate=self.yaw_rate,
+        )
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """Velocity vector [m/s], shape (2,)."""
+        return np.array([self.v * math.cos(self.yaw), self.v * math.sin(self.yaw)])
+
+
+@dataclass(frozen=True, slots=True)
+class LegalCorridor:
+    """What a road user may legally do within the horizon (its legal reachable set).
+
+    The set is an oriented strip along the road user's current heading: it may move
+    between full braking and accelerating to its speed limit, and sideways by at most
+    ``lateral_half_width`` [m] (staying in its lane or on its sidewalk). A stop line
+    (red light, give-way) ``stop_distance`` [m] ahead of its centre caps the strip.
+
+    Attributes:
+        speed_limit: legal speed [m/s].
+        lateral_half_width: allowed sideways excursion of its centre [m].
+        stop_distance: distance to a stop line it must respect [m], or None.
+        max_acceleration: [m/s^2].
+        max_deceleration: positive braking capability [m/s^2].
+    """
+
+    speed_limit: float
+    lateral_half_width: float
+    stop_distance: float | None = None
+    max_acceleration: float = 2.0
+    max_deceleration: float = 8.0
+
+    def __post_init__(self) -> None:
+        _require_finite(
+            "LegalCorridor",
+            speed_limit=self.speed_limit,
+            lateral_half_width=self.lateral_half_width,
+            max_acceleration=self.max_acceleration,
+            max_deceleration=self.max_deceleration,
+        )
+        if self.speed_limit < 0 or self.lateral_half_width < 0:
+            raise ValueError("LegalCorridor.speed_limit and lateral_half_width must be >= 0")
+        if self.max_acceleration < 0 or self.max_deceleration <= 0:
+            raise ValueError(
+                "LegalCorridor.max_acceleration must be >= 0 and max_deceleration > 0 m/s^2"
+            )
+        if self.stop_distance is not None:
+            _require_finite("LegalCorridor", stop_distance=self.stop_distance)
+
+
+@dataclass(frozen=True, slots=True)
+class RoadUser:
+    """Another road user as the planner observes it.
+
+    Attributes:
+        id: unique integer id.
+        type: road-user type.
+        state: current kinematic state of its centre.
+        shape: footprint.
+        mass: [kg]; defaults to ``mass_of(type, length, width)``.
+        legal: its legal corridor, or None to derive one from the road (see
+            ``ethical_planner.responsibility``).
+    """
+
+    id: int
+    type: RoadUserType
+    state: KinematicState
+    shape: Shape
+    mass: float = field(default=float("nan"))
+    legal: LegalCorridor | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "type", RoadUserType.parse(self.type))
+        if math.isnan(self.mass):
+            object.__setattr__(
+                self, "mass", mass_of(self.type, self.shape.length, self.shape.width)
+            )
+        _require_finite("RoadUser", mass=self.mass)
+        if self.mass <= 0:
+            raise ValueError(f"RoadUser.mass must be > 0 kg, got {self.mass}")
+
+    @property
+    def is_vulnerable(self) -> bool:
+        """True for pedestrians, cyclists and motorcyclists."""
+        return self.type in VULNERABLE_TYPES

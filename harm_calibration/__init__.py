@@ -1,0 +1,1 @@
+"""Validation and calibration of the harm model against simulated impacts."""

@@ -1,0 +1,1 @@
+"""Closed-loop MuJoCo world in which the ethical planner drives an ego body."""
