@@ -40,7 +40,8 @@ class SamplingConfig:
         horizons: planning horizons T [s]; candidates of shorter horizons continue
             at constant speed and offset up to the longest.
         dt: time step [s].
-        max_end_acceleration: end speeds span v0 -+ this times T [m/s^2].
+        max_end_acceleration: end speeds reach up to v0 + this times T [m/s^2].
+        max_end_deceleration: end speeds reach down to v0 - this times T (and 0) [m/s^2].
     """
 
     n_speeds: int = 15
@@ -50,6 +51,7 @@ class SamplingConfig:
     horizons: tuple[float, ...] = (2.0,)
     dt: float = 0.1
     max_end_acceleration: float = 4.0
+    max_end_deceleration: float = 8.0
 
     def __post_init__(self) -> None:
         _finite("sampling", self)
@@ -64,7 +66,10 @@ class SamplingConfig:
                 math.isfinite(horizon) and horizon >= self.dt,
                 f"sampling.horizons must be finite and >= dt ({self.dt} s), got {horizon}",
             )
-        _check(self.max_end_acceleration > 0, "sampling.max_end_acceleration must be > 0")
+        _check(
+            self.max_end_acceleration > 0 and self.max_end_deceleration > 0,
+            "sampling.max_end_acceleration and max_end_deceleration must be > 0 m/s^2",
+        )
 
     @property
     def n_trajectories(self) -> int:

@@ -7,7 +7,7 @@ negative size is rejected where it enters the planner, not deep in a cost.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
@@ -231,6 +231,19 @@ class RoadUser:
         _require_finite("RoadUser", mass=self.mass)
         if self.mass <= 0:
             raise ValueError(f"RoadUser.mass must be > 0 kg, got {self.mass}")
+
+    def advanced(self, dt: float) -> RoadUser:
+        """The same road user ``dt`` [s] later at constant speed and turn rate."""
+        state = self.state
+        yaw = state.yaw + state.yaw_rate * dt
+        mid = state.yaw + 0.5 * state.yaw_rate * dt
+        moved = replace(
+            state,
+            x=state.x + state.v * dt * math.cos(mid),
+            y=state.y + state.v * dt * math.sin(mid),
+            yaw=yaw,
+        )
+        return replace(self, state=moved)
 
     @property
     def is_vulnerable(self) -> bool:

@@ -165,8 +165,8 @@ def sample_candidates(
 ) -> Candidates:
     """Sample the candidate grid: end speeds x end offsets x horizons.
 
-    End speeds span [v0 - a T, v0 + a T] clipped to [0, v_max] with a =
-    ``config.max_end_acceleration``; end offsets span [d_min, d_max].
+    End speeds span [v0 - b T, v0 + a T] clipped to [0, v_max] (b and a from
+    ``config``); end offsets span [d_min, d_max].
 
     Args:
         start: ego Frenet state.
@@ -181,7 +181,7 @@ def sample_candidates(
     v0 = max(start.s_dot, 0.0)
     speeds, offsets, horizons = [], [], []
     for horizon in config.horizons:  # one to three horizons, not per trajectory
-        lo = max(0.0, v0 - config.max_end_acceleration * horizon)
+        lo = max(0.0, v0 - config.max_end_deceleration * horizon)
         hi = min(v_max, v0 + config.max_end_acceleration * horizon)
         v_grid = np.linspace(lo, max(hi, lo), config.n_speeds)
         d_grid = np.linspace(config.d_min, config.d_max, config.n_offsets)

@@ -1,0 +1,743 @@
+"""Harm: injury probability of a collision from delta-v and impact area (paper Eqs. 1, 2).
+
+Every model variant of SPEC section 3 is one row of ``data/harm_parameters.toml``;
+each functional form has exactly one vectorised function (``_FORMS``), and each
+impact-area scheme is a bin width plus a table from bin code to area key
+(``_AREA_BINS``). All functions take and return numpy arrays that broadcast against
+each other, so the planner can evaluate arrays of shape (n_traj, n_obs, n_t) in one call.
+
+Angles are counter-clockwise positive in a body's own frame and wrapped into
+(-pi, pi]: 0 = front, +pi/2 = left (driver side), -pi/2 = right, pi = rear.
+Bin edges follow the reference implementation: a value exactly on an edge goes to
+the bin further from the front (45 deg is side, 135 deg is rear, 15 deg is clock 11).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import tomllib
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from enum import IntEnum, StrEnum
+from importlib import resources
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.special import expit
+
+_TWO_PI = 2.0 * math.pi
+
+
+class HarmModel(StrEnum):
+    """Harm model variant; the value is the row name in ``harm_parameters.toml``."""
+
+    IGNORE_ANGLE = "ignore_angle"  # LR1
+    REDUCED = "reduced"  # LR4, asymmetric four areas
+    REDUCED_SYM = "reduced_sym"  # LR4S, the default
+    COMPLETE = "complete"  # LR12, twelve clock areas
+    COMPLETE_SYM = "complete_sym"  # LR12S
+    PEDESTRIAN_MAIS3 = "pedestrian_mais3"
+    PEDESTRIAN_MAIS2 = "pedestrian_mais2"
+    GIDAS = "gidas"  # MAIS2+, no areas
+    REF_SPEED_IGNORE_ANGLE = "ref_speed_ignore_angle"
+    REF_SPEED_REDUCED_SYM = "ref_speed_reduced_sym"
+
+    @classmethod
+    def parse(cls, value: str | HarmModel) -> HarmModel:
+        """Return the model named by ``value`` or raise a ValueError listing the allowed names."""
+        try:
+            return cls(value)
+        except ValueError:
+            allowed = ", ".join(m.value for m in cls)
+            raise ValueError(f"unknown harm model {value!r}; allowed: {allowed}") from None
+
+
+class FunctionalForm(StrEnum):
+    """Functional form of a harm model (one vectorised function each)."""
+
+    PROTECTED_LOGISTIC = "protected_logistic"
+    UNPROTECTED_LOGISTIC = "unprotected_logistic"
+    REFERENCE_SPEED = "reference_speed"
+
+
+class AreaScheme(StrEnum):
+    """How the impact angle is binned into areas with their own coefficient."""
+
+    NONE = "none"
+    REDUCED_ASYM = "reduced_asym"
+    REDUCED_SYM = "reduced_sym"
+    CLOCK = "clock"
+    CLOCK_SYM = "clock_sym"
+
+
+class ReducedArea(IntEnum):
+    """Four impact areas; the driver side is the left (positive angles)."""
+
+    FRONT = 0
+    DRIVER_SIDE = 1
+    RIGHT_SIDE = 2
+    REAR = 3
+
+
+DEFAULT_MODEL = HarmModel.REDUCED_SYM
+DEFAULT_PEDESTRIAN_MODEL = HarmModel.PEDESTRIAN_MAIS3
+
+# Impact areas are found from a bin code: with a wrapped angle a and a bin width w,
+# code = 2 * floor(|a| / w + 1/2) + (a > 0), i.e. the number of bin edges behind |a|
+# (a value on an edge goes to the bin further from the front) and the side.
+_REDUCED_WIDTH = math.radians(90.0)
+_CLOCK_WIDTH = math.radians(30.0)
+#: ReducedArea by bin code (width 90 deg).
+_REDUCED_BY_CODE = np.array(
+    [
+        ReducedArea.FRONT, ReducedArea.FRONT,
+        ReducedArea.RIGHT_SIDE, ReducedArea.DRIVER_SIDE,
+        ReducedArea.REAR, ReducedArea.REAR,
+    ],
+    dtype=np.intp,
+)  # fmt: skip
+#: Clock position by bin code (width 30 deg): right side k o'clock, left side 12 - k.
+_CLOCK_BY_CODE = np.array([12, 12, 1, 11, 2, 10, 3, 9, 4, 8, 5, 7, 6, 6], dtype=np.intp)
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _finite(name: str, value: ArrayLike, allowed: str = "finite numbers") -> np.ndarray:
+    """``value`` as a float array, or a ValueError naming ``name`` and the first bad entry."""
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {allowed}, got {value!r}") from None
+    ok = np.isfinite(array)
+    if not ok.all():
+        _raise_bad(name, array, ok, allowed)
+    return array
+
+
+def _raise_bad(name: str, array: np.ndarray, ok: np.ndarray, allowed: str) -> None:
+    if array.ndim == 0:
+        raise ValueError(f"{name} must be {allowed}, got {array.item()!r}")
+    index = tuple(int(i) for i in np.argwhere(~ok)[0])
+    raise ValueError(f"{name} must be {allowed}, got {array[index]!r} at index {index}")
+
+
+def _non_negative(name: str, value: ArrayLike, unit: str) -> np.ndarray:
+    allowed = f"finite and >= 0 {unit}"
+    array = _finite(name, value, allowed)
+    ok = array >= 0.0
+    if not ok.all():
+        _raise_bad(name, array, ok, allowed)
+    return array
+
+
+def _positive(name: str, value: ArrayLike, unit: str) -> np.ndarray:
+    allowed = f"finite and > 0 {unit}"
+    array = _finite(name, value, allowed)
+    ok = array > 0.0
+    if not ok.all():
+        _raise_bad(name, array, ok, allowed)
+    return array
+
+
+def _vectors(name: str, value: ArrayLike, unit: str) -> np.ndarray:
+    array = _finite(name, value, f"finite {unit}")
+    if array.ndim == 0 or array.shape[-1] != 2:
+        raise ValueError(f"{name} must have shape (..., 2) {unit}, got shape {array.shape}")
+    return array
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+def wrap_angle(angle: ArrayLike) -> np.ndarray:
+    """Wrap angles into (-pi, pi].
+
+    Args:
+        angle: angles [rad], any shape.
+
+    Returns:
+        Wrapped angles [rad], same shape.
+
+    """
+    return _wrap_in_place(np.array(angle, dtype=float))
+
+
+def _own(value: ArrayLike, *others: ArrayLike) -> np.ndarray | None:
+    """``value`` as the output buffer of an elementwise op with ``others``, if it fits.
+
+    Hot-path helper: reusing buffers of arrays this module just created avoids fresh
+    allocations (page faults dominate numpy time on shared machines). Never pass an
+    array that came from a caller.
+    """
+    if isinstance(value, np.ndarray) and value.shape == np.broadcast_shapes(
+        value.shape, *(np.shape(o) for o in others)
+    ):
+        return value
+    return None
+
+
+def _wrap_in_place(angle: np.ndarray) -> np.ndarray:
+    """Wrap a float array this module owns into (-pi, pi], in place where possible."""
+    angle = np.asarray(angle)
+    turns = np.multiply(angle, 1.0 / _TWO_PI, out=np.empty_like(angle))
+    np.rint(turns, out=turns)
+    turns *= _TWO_PI
+    angle -= turns  # now in [-pi, pi] up to rounding; unchanged if already inside
+    low = angle <= -np.pi
+    if low.any():
+        angle[low] += _TWO_PI
+    high = angle > np.pi
+    if high.any():
+        angle[high] -= _TWO_PI
+    return angle
+
+
+def _area_code(wrapped: np.ndarray, width: float) -> np.ndarray:
+    """Bin code 2 * (bins behind |a|) + (a > 0) of wrapped angles [rad], integer array."""
+    code = np.abs(wrapped, out=np.empty_like(wrapped))
+    code *= 1.0 / width
+    code += 0.5
+    np.floor(code, out=code)
+    code *= 2.0
+    code += wrapped > 0.0
+    return code.astype(np.intp)
+
+
+def reduced_area(angle: ArrayLike) -> np.ndarray:
+    """Reduced impact area of angles in a body's frame.
+
+    Front |a| < 45 deg, side 45 <= |a| < 135 deg (driver side for a > 0), rear beyond.
+
+    Args:
+        angle: impact angle [rad], any shape; wrapped first.
+
+    Returns:
+        ``ReducedArea`` values as an integer array, same shape.
+
+    """
+    wrapped = wrap_angle(_finite("angle", angle, "finite angles [rad]"))
+    return _REDUCED_BY_CODE[_area_code(wrapped, _REDUCED_WIDTH)]
+
+
+def clock_area(angle: ArrayLike) -> np.ndarray:
+    """Clock position 1..12 of angles: (12 - round(deg / 30)) mod 12, with 0 written as 12.
+
+    12 = front, 3 = right, 6 = rear, 9 = left. Halves round away from zero
+    (15 deg is 11, -15 deg is 1), as the reference implementation bins them.
+
+    Args:
+        angle: impact angle [rad], any shape; wrapped first.
+
+    Returns:
+        Integer array of clock positions, same shape.
+
+    """
+    wrapped = wrap_angle(_finite("angle", angle, "finite angles [rad]"))
+    return _CLOCK_BY_CODE[_area_code(wrapped, _CLOCK_WIDTH)]
+
+
+def impact_angles(
+    x_ego: ArrayLike,
+    y_ego: ArrayLike,
+    yaw_ego: ArrayLike,
+    x_obs: ArrayLike,
+    y_obs: ArrayLike,
+    yaw_obs: ArrayLike,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Direction of the other body as seen from each body's heading (SPEC impact area).
+
+    rel = atan2(y_obs - y_ego, x_obs - x_ego); ego_angle = wrap(rel - yaw_ego);
+    obs_angle = wrap(pi + rel - yaw_obs). Coinciding centres give rel = 0.
+
+    Args:
+        x_ego: ego centre x [m], broadcastable.
+        y_ego: ego centre y [m], broadcastable.
+        yaw_ego: ego heading [rad], broadcastable.
+        x_obs: other road user's centre x [m], broadcastable.
+        y_obs: other road user's centre y [m], broadcastable.
+        yaw_obs: other road user's heading [rad], broadcastable.
+
+    Returns:
+        (ego_angle, obs_angle) [rad] in (-pi, pi]: the broadcast shape of the positions
+        with ``yaw_ego`` and with ``yaw_obs`` respectively.
+
+    """
+    names = ("x_ego", "y_ego", "yaw_ego", "x_obs", "y_obs", "yaw_obs")
+    values = (x_ego, y_ego, yaw_ego, x_obs, y_obs, yaw_obs)
+    xe, ye, he, xo, yo, ho = (_finite(n, v) for n, v in zip(names, values, strict=True))
+    dy = yo - ye
+    dx = xo - xe
+    rel = np.arctan2(dy, dx, out=_own(dy, dx))
+    obs_angle = np.subtract(rel, ho, out=_own(dx, rel, ho))
+    obs_angle += np.pi
+    ego_angle = np.subtract(rel, he, out=_own(rel, he))
+    return _wrap_in_place(ego_angle), _wrap_in_place(obs_angle)
+
+
+def delta_v(
+    mass_a: ArrayLike, mass_b: ArrayLike, vel_a: ArrayLike, vel_b: ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """Delta-v of both bodies in a perfectly plastic collision (paper Eq. 1).
+
+    dv_a = m_b / (m_a + m_b) |v_a - v_b|, dv_b = m_a / (m_a + m_b) |v_a - v_b|,
+    so m_a dv_a = m_b dv_b.
+
+    Args:
+        mass_a: mass of body a [kg], > 0, broadcastable against ``vel_a[..., 0]``.
+        mass_b: mass of body b [kg], > 0.
+        vel_a: velocity of body a [m/s], shape (..., 2).
+        vel_b: velocity of body b [m/s], shape (..., 2), broadcastable against ``vel_a``.
+
+    Returns:
+        (dv_a, dv_b) [m/s], of the broadcast shape without the last axis.
+
+    """
+    m_a = _positive("mass_a", mass_a, "[kg]")
+    m_b = _positive("mass_b", mass_b, "[kg]")
+    va = _vectors("vel_a", vel_a, "[m/s]")
+    vb = _vectors("vel_b", vel_b, "[m/s]")
+    closing = np.subtract(va[..., 0], vb[..., 0])
+    closing = np.multiply(closing, closing, out=_own(closing))
+    dy = np.subtract(va[..., 1], vb[..., 1])
+    closing = np.add(closing, np.multiply(dy, dy, out=_own(dy)), out=_own(closing))
+    closing = np.sqrt(closing, out=_own(closing))
+    total = m_a + m_b
+    dv_a = closing * (m_b / total)
+    return dv_a, np.multiply(closing, m_a / total, out=_own(closing, total))
+
+
+def delta_v_polar(
+    mass_a: ArrayLike,
+    mass_b: ArrayLike,
+    speed_a: ArrayLike,
+    speed_b: ArrayLike,
+    yaw_a: ArrayLike,
+    yaw_b: ArrayLike,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Delta-v from speeds and headings, the paper's cosine form of Eq. 1.
+
+    dv_a = m_b / (m_a + m_b) sqrt(v_a^2 + v_b^2 - 2 v_a v_b cos(yaw_b - yaw_a)).
+
+    Args:
+        mass_a: mass of body a [kg], > 0.
+        mass_b: mass of body b [kg], > 0.
+        speed_a: speed of a along its heading [m/s] (may be negative).
+        speed_b: speed of b along its heading [m/s] (may be negative).
+        yaw_a: heading of a [rad].
+        yaw_b: heading of b [rad].
+
+    Returns:
+        (dv_a, dv_b) [m/s], of the broadcast shape of the arguments.
+
+    """
+    m_a = _positive("mass_a", mass_a, "[kg]")
+    m_b = _positive("mass_b", mass_b, "[kg]")
+    v_a = _finite("speed_a", speed_a, "finite speeds [m/s]")
+    v_b = _finite("speed_b", speed_b, "finite speeds [m/s]")
+    alpha = _finite("yaw_b", yaw_b) - _finite("yaw_a", yaw_a)
+    squared = v_a * v_a + v_b * v_b - 2.0 * v_a * v_b * np.cos(alpha)
+    closing = np.sqrt(np.maximum(squared, 0.0))
+    total = m_a + m_b
+    return m_b / total * closing, m_a / total * closing
+
+
+# --------------------------------------------------------------------------- coefficients
+
+
+def _sym_clock_key(clock: int) -> str:
+    return str(clock) if clock in (6, 12) else f"{min(clock, 12 - clock)}_{max(clock, 12 - clock)}"
+
+
+@dataclass(frozen=True, slots=True)
+class _AreaBins:
+    """Bin width [rad] of a scheme and the area key of each bin code."""
+
+    width: float
+    keys: tuple[str, ...]
+
+
+#: Impact-area schemes; None: no areas, the row's single key is "all".
+_AREA_BINS: dict[AreaScheme, _AreaBins | None] = {
+    AreaScheme.NONE: None,
+    AreaScheme.REDUCED_ASYM: _AreaBins(
+        _REDUCED_WIDTH, tuple(ReducedArea(a).name.lower() for a in _REDUCED_BY_CODE)
+    ),
+    AreaScheme.REDUCED_SYM: _AreaBins(
+        _REDUCED_WIDTH,
+        tuple("side" if 0 < a < 3 else ReducedArea(a).name.lower() for a in _REDUCED_BY_CODE),
+    ),
+    AreaScheme.CLOCK: _AreaBins(_CLOCK_WIDTH, tuple(str(c) for c in _CLOCK_BY_CODE)),
+    AreaScheme.CLOCK_SYM: _AreaBins(_CLOCK_WIDTH, tuple(_sym_clock_key(c) for c in _CLOCK_BY_CODE)),
+}
+
+
+def _area_keys(scheme: AreaScheme) -> tuple[str, ...]:
+    bins = _AREA_BINS[scheme]
+    return ("all",) if bins is None else bins.keys
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+_ROW_KEYS = frozenset({"label", "injury", "form", "areas", "c0", "c1", "area"})
+_INJURY_LEVELS = ("MAIS2+", "MAIS3+")
+
+
+@dataclass(frozen=True, slots=True)
+class HarmCoefficients:
+    """One row of ``harm_parameters.toml``.
+
+    Attributes:
+        model: the model variant.
+        label: short name as in the literature (``"LR4S"``).
+        injury: injury level whose probability the model gives (``"MAIS3+"``, ``"MAIS2+"``).
+        form: functional form.
+        areas: impact-area scheme.
+        c0: constant (logistic forms); 0 for the reference-speed form.
+        c1: speed coefficient [s/m] (logistic forms) or exponent (reference speed).
+        area: area coefficients as in the file (reference speeds [m/s] for that form).
+        lookup: ``area`` expanded to one value per bin code of the scheme.
+
+    """
+
+    model: HarmModel
+    label: str
+    injury: str
+    form: FunctionalForm
+    areas: AreaScheme
+    c0: float
+    c1: float
+    area: Mapping[str, float] = field(hash=False)
+    lookup: np.ndarray = field(init=False, repr=False, compare=False, hash=False)
+
+    def __post_init__(self) -> None:
+        where = f"harm model {self.model.value!r}"
+        for name in ("c0", "c1"):
+            value = getattr(self, name)
+            if not _is_number(value):
+                raise ValueError(f"{where}: {name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        if self.injury not in _INJURY_LEVELS:
+            raise ValueError(
+                f"{where}: injury must be one of {_INJURY_LEVELS}, got {self.injury!r}"
+            )
+        keys = _area_keys(self.areas)
+        expected = set(keys)
+        if set(self.area) != expected:
+            raise ValueError(
+                f"{where}: area keys for scheme {self.areas.value!r} must be "
+                f"{sorted(expected)}, got {sorted(self.area)}"
+            )
+        for key, value in self.area.items():
+            if not _is_number(value):
+                raise ValueError(f"{where}: area.{key} must be a finite number, got {value!r}")
+        if self.form is FunctionalForm.UNPROTECTED_LOGISTIC and self.areas is not AreaScheme.NONE:
+            raise ValueError(f"{where}: the unprotected_logistic form takes areas = 'none'")
+        if self.form is FunctionalForm.REFERENCE_SPEED:
+            if self.c0 != 0.0 or self.c1 <= 0.0 or min(self.area.values()) <= 0.0:
+                raise ValueError(
+                    f"{where}: reference_speed needs c0 = 0, exponent c1 > 0 and "
+                    "reference speeds (area) > 0 m/s"
+                )
+        lookup = np.array([float(self.area[key]) for key in keys])
+        lookup.flags.writeable = False
+        object.__setattr__(self, "area", MappingProxyType(dict(self.area)))
+        object.__setattr__(self, "lookup", lookup)
+
+
+def _parse_enum(enum: type[StrEnum], where: str, key: str, value: Any) -> Any:
+    try:
+        return enum(value)
+    except ValueError:
+        allowed = ", ".join(e.value for e in enum)
+        raise ValueError(f"{where}: {key} must be one of {allowed}; got {value!r}") from None
+
+
+def parse_harm_parameters(text: str) -> Mapping[HarmModel, HarmCoefficients]:
+    """Parse a harm parameter table in the format of ``data/harm_parameters.toml``.
+
+    Args:
+        text: TOML text with one ``[models.<name>]`` table per ``HarmModel``.
+
+    Returns:
+        Read-only mapping from every ``HarmModel`` to its coefficients.
+
+    Raises:
+        ValueError: a model is missing or unknown, a key is unknown or missing, or a
+            value is out of range; the message names it.
+
+    """
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"harm parameters are not valid TOML: {error}") from None
+    if set(raw) != {"models"}:
+        raise ValueError(
+            f"harm parameters need exactly one top-level table 'models', got {sorted(raw)}"
+        )
+    rows = raw["models"]
+    missing = sorted(m.value for m in HarmModel if m.value not in rows)
+    if missing:
+        raise ValueError(f"harm parameters: missing models {missing}")
+    table: dict[HarmModel, HarmCoefficients] = {}
+    for name, row in rows.items():
+        model = HarmModel.parse(name)
+        where = f"harm model {name!r}"
+        if not isinstance(row, dict):
+            raise ValueError(f"{where}: must be a table, got {row!r}")
+        unknown = sorted(set(row) - _ROW_KEYS)
+        if unknown:
+            raise ValueError(f"{where}: unknown keys {unknown}; allowed: {sorted(_ROW_KEYS)}")
+        absent = sorted(_ROW_KEYS - set(row) - {"area"})
+        if absent:
+            raise ValueError(f"{where}: missing keys {absent}")
+        form = _parse_enum(FunctionalForm, where, "form", row["form"])
+        areas = _parse_enum(AreaScheme, where, "areas", row["areas"])
+        area = row.get("area")
+        if area is not None and not isinstance(area, dict):
+            raise ValueError(f"{where}: area must be a table, got {area!r}")
+        if area is None:
+            if form is FunctionalForm.REFERENCE_SPEED or areas is not AreaScheme.NONE:
+                raise ValueError(f"{where}: missing key 'area'")
+            area = {"all": 0.0}
+        table[model] = HarmCoefficients(
+            model=model,
+            label=str(row["label"]),
+            injury=str(row["injury"]),
+            form=form,
+            areas=areas,
+            c0=row["c0"],
+            c1=row["c1"],
+            area=area,
+        )
+    return MappingProxyType(table)
+
+
+@functools.cache
+def harm_coefficients() -> Mapping[HarmModel, HarmCoefficients]:
+    """Coefficients of every harm model, read once from the package's ``harm_parameters.toml``."""
+    source = resources.files("ethical_planner").joinpath("data", "harm_parameters.toml")
+    return parse_harm_parameters(source.read_text(encoding="utf-8"))
+
+
+def coefficients(model: HarmModel | str) -> HarmCoefficients:
+    """Coefficients of one harm model (``model`` may be its name)."""
+    return harm_coefficients()[HarmModel.parse(model)]
+
+
+# --------------------------------------------------------------------------- harm
+
+
+def _protected_logistic(c: HarmCoefficients, dv: np.ndarray, area: np.ndarray) -> np.ndarray:
+    logit = np.multiply(dv, c.c1)
+    logit = np.add(logit, c.c0, out=_own(logit))
+    logit = np.add(logit, area, out=_own(logit, area))
+    return expit(logit, out=_own(logit))
+
+
+def _unprotected_logistic(c: HarmCoefficients, dv: np.ndarray, area: np.ndarray) -> np.ndarray:
+    logit = np.multiply(dv, c.c1)
+    logit = np.subtract(logit, c.c0, out=_own(logit))
+    return expit(logit, out=_own(logit))
+
+
+def _reference_speed(c: HarmCoefficients, dv: np.ndarray, area: np.ndarray) -> np.ndarray:
+    return np.minimum(1.0, np.power(dv / area, c.c1))
+
+
+#: One vectorised function per functional form: (coefficients, dv [m/s], area value) -> H.
+_FORMS: dict[FunctionalForm, Callable[[HarmCoefficients, np.ndarray, np.ndarray], np.ndarray]] = {
+    FunctionalForm.PROTECTED_LOGISTIC: _protected_logistic,
+    FunctionalForm.UNPROTECTED_LOGISTIC: _unprotected_logistic,
+    FunctionalForm.REFERENCE_SPEED: _reference_speed,
+}
+
+
+def uses_angle(model: HarmModel | str) -> bool:
+    """Return True if ``model`` distinguishes impact areas (``harm`` then needs an angle)."""
+    return coefficients(model).areas is not AreaScheme.NONE
+
+
+def _harm_unchecked(c: HarmCoefficients, dv: np.ndarray, wrapped: np.ndarray) -> np.ndarray:
+    bins = _AREA_BINS[c.areas]
+    area = c.lookup[0] if bins is None else np.take(c.lookup, _area_code(wrapped, bins.width))
+    return _FORMS[c.form](c, dv, area)
+
+
+def harm(model: HarmModel | str, dv: ArrayLike, angle: ArrayLike | None = None) -> np.ndarray:
+    """Injury probability (paper Eq. 2) of a road user with delta-v ``dv``.
+
+    The probability is of the model's injury level: MAIS3+ for all models but
+    ``pedestrian_mais2`` and ``gidas`` (MAIS2+), see ``HarmCoefficients.injury``.
+
+    Args:
+        model: harm model variant (or its name).
+        dv: delta-v of the road user [m/s], >= 0, any shape.
+        angle: impact angle in the road user's own frame [rad], broadcastable against
+            ``dv``; required by models with impact areas, ignored by the others.
+
+    Returns:
+        Probability in [0, 1]: the broadcast shape of ``dv`` and ``angle`` for area
+        models, the shape of ``dv`` otherwise.
+
+    Raises:
+        ValueError: unknown model, dv negative or not finite, angle missing or not finite.
+
+    """
+    c = coefficients(model)
+    dv_array = _non_negative("dv", dv, "[m/s]")
+    if c.areas is AreaScheme.NONE:
+        return _harm_unchecked(c, dv_array, dv_array)
+    if angle is None:
+        raise ValueError(
+            f"harm model {c.model.value!r} distinguishes impact areas ({c.areas.value}); "
+            "pass angle [rad]"
+        )
+    wrapped = wrap_angle(_finite("angle", angle, "finite angles [rad]"))
+    return _harm_unchecked(c, dv_array, wrapped)
+
+
+def boundary_harm(ego_speed: ArrayLike) -> np.ndarray:
+    """Ego harm when leaving the road: a rigid wall, dv = |ego speed|, ignore-angle model.
+
+    Args:
+        ego_speed: ego speed [m/s], any shape; the sign (reversing) is ignored.
+
+    Returns:
+        MAIS3+ probability, same shape.
+
+    """
+    speed = np.abs(_finite("ego_speed", ego_speed, "finite speeds [m/s]"))
+    return _harm_unchecked(coefficients(HarmModel.IGNORE_ANGLE), speed, speed)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class CollisionHarm:
+    """Harm of both partners of a collision of the ego with another road user.
+
+    All arrays have the broadcast shape of ``collision_harm``'s arguments.
+    ``harm_ego, harm_obs = collision_harm(...)`` unpacks the two harms.
+
+    Attributes:
+        harm_ego: ego injury probability.
+        harm_obs: other road user's injury probability.
+        dv_ego: ego delta-v [m/s].
+        dv_obs: other road user's delta-v [m/s].
+        ego_angle: impact angle in the ego frame [rad], (-pi, pi].
+        obs_angle: impact angle in the other road user's frame [rad], (-pi, pi].
+
+    """
+
+    harm_ego: np.ndarray
+    harm_obs: np.ndarray
+    dv_ego: np.ndarray
+    dv_obs: np.ndarray
+    ego_angle: np.ndarray
+    obs_angle: np.ndarray
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        """Yield ``harm_ego`` then ``harm_obs``."""
+        yield self.harm_ego
+        yield self.harm_obs
+
+
+def _select(condition: np.ndarray, if_true: np.ndarray, if_false: np.ndarray) -> np.ndarray:
+    """``np.where(condition, if_true, if_false)``, written into ``if_false`` when it fits."""
+    out = _own(if_false, condition, if_true)
+    if out is None:
+        return np.where(condition, if_true, if_false)
+    np.copyto(out, if_true, where=condition)
+    return out
+
+
+def collision_harm(
+    ego_mass: ArrayLike,
+    ego_vel: ArrayLike,
+    ego_pos: ArrayLike,
+    ego_yaw: ArrayLike,
+    obs_mass: ArrayLike,
+    obs_vel: ArrayLike,
+    obs_pos: ArrayLike,
+    obs_yaw: ArrayLike,
+    obs_unprotected: ArrayLike,
+    model: HarmModel | str = DEFAULT_MODEL,
+    pedestrian_model: HarmModel | str = DEFAULT_PEDESTRIAN_MODEL,
+) -> CollisionHarm:
+    """Harm of the ego and of another road user if they collide in the given states.
+
+    Delta-v by Eq. 1 and impact angles as in ``impact_angles``. A protected partner:
+    both harms by ``model``, each with its own impact angle. An unprotected partner
+    (pedestrian, cyclist, motorcyclist): its harm by ``pedestrian_model``, the ego's
+    harm by the ignore-angle model (SPEC section 3).
+
+    Typical planner shapes: ego arrays (n_traj, 1, n_t), other (1, n_obs, n_t),
+    vectors with a trailing axis of 2, ``obs_unprotected`` (1, n_obs, 1).
+
+    Args:
+        ego_mass: [kg], > 0, broadcastable.
+        ego_vel: ego velocity vector [m/s], shape (..., 2).
+        ego_pos: ego centre [m], shape (..., 2).
+        ego_yaw: ego heading [rad].
+        obs_mass: other road user's mass [kg], > 0.
+        obs_vel: its velocity vector [m/s], shape (..., 2).
+        obs_pos: its centre [m], shape (..., 2).
+        obs_yaw: its heading [rad].
+        obs_unprotected: bool array, True where the other road user is unprotected.
+        model: harm model of protected road users.
+        pedestrian_model: harm model of unprotected road users.
+
+    Returns:
+        ``CollisionHarm`` with arrays of the broadcast shape (vectors without their last axis).
+
+    Raises:
+        ValueError: non-positive or non-finite mass, non-finite state, vectors without a
+            last axis of 2, ``obs_unprotected`` not boolean, unknown model.
+
+    """
+    protected_c = coefficients(model)
+    unprotected_c = coefficients(pedestrian_model)
+    unprotected = np.asarray(obs_unprotected)
+    if unprotected.dtype != np.bool_:
+        raise ValueError(
+            f"obs_unprotected must be boolean (True for pedestrians, cyclists, motorcyclists), "
+            f"got dtype {unprotected.dtype}"
+        )
+    dv_ego, dv_obs = delta_v(ego_mass, obs_mass, ego_vel, obs_vel)
+    ep = _vectors("ego_pos", ego_pos, "[m]")
+    op = _vectors("obs_pos", obs_pos, "[m]")
+    ego_angle, obs_angle = impact_angles(
+        ep[..., 0], ep[..., 1], ego_yaw, op[..., 0], op[..., 1], obs_yaw
+    )
+    shape = np.broadcast_shapes(dv_ego.shape, ego_angle.shape, obs_angle.shape, unprotected.shape)
+
+    any_unprotected = bool(unprotected.any())
+    all_unprotected = any_unprotected and bool(unprotected.all())
+    harm_ego = harm_obs = None
+    if not all_unprotected:
+        harm_ego = _harm_unchecked(protected_c, dv_ego, ego_angle)
+        harm_obs = _harm_unchecked(protected_c, dv_obs, obs_angle)
+    if any_unprotected:
+        ego_u = _harm_unchecked(coefficients(HarmModel.IGNORE_ANGLE), dv_ego, ego_angle)
+        obs_u = _harm_unchecked(unprotected_c, dv_obs, obs_angle)
+        if all_unprotected:
+            harm_ego, harm_obs = ego_u, obs_u
+        else:
+            harm_ego = _select(unprotected, ego_u, harm_ego)
+            harm_obs = _select(unprotected, obs_u, harm_obs)
+
+    def full(array: np.ndarray) -> np.ndarray:
+        return array if array.shape == shape else np.broadcast_to(array, shape).copy()
+
+    return CollisionHarm(
+        harm_ego=full(harm_ego),
+        harm_obs=full(harm_obs),
+        dv_ego=full(dv_ego),
+        dv_obs=full(dv_obs),
+        ego_angle=full(ego_angle),
+        obs_angle=full(obs_angle),
+    )
