@@ -272,7 +272,7 @@ def _apply(obj: Any, overrides: dict[str, Any], prefix: str) -> Any:
     for key, value in overrides.items():
         if key not in known:
             allowed = ", ".join(sorted(known))
-            raise ValueError(f"unknown configuration key {prefix}{key!r}; allowed here: {allowed}")
+            raise ValueError(f"unknown configuration key '{prefix}{key}'; allowed here: {allowed}")
         current = getattr(obj, key)
         if dataclasses.is_dataclass(current):
             changes[key] = _apply(current, value, prefix=f"{prefix}{key}.")

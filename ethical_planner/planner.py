@@ -225,8 +225,8 @@ class Planner:
         timings["risk"] = timings.get("risk", 0.0) + _since(clock)
         clock = time.perf_counter()
         r_obs, r_ego = responsibilities(
-            candidates, risk.probability, prediction, corridors, self.ego_shape,
-            self.ego_mass, config.responsibility,
+            candidates, risk.probability, prediction, corridors, self.ego_mass,
+            config.responsibility,
         )
         timings["responsibility"] = timings.get("responsibility", 0.0) + _since(clock)
         clock = time.perf_counter()

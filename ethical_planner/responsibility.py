@@ -4,9 +4,10 @@ Three sources, added and kept below 1 by ``ResponsibilityConfig``:
 
 1. base: motorised road users bring risk into traffic in proportion to their mass,
    r_base = base_max (1 - exp(-m / base_mass_scale)); pedestrians and cyclists get 0;
-2. traffic rules: if the potential collision lies outside road user k's legal
-   reachable set (its ``LegalCorridor``: braking to accelerating up to its speed
-   limit, staying in its lane, stopping at a stop line), k is responsible;
+2. traffic rules: if road user k, moving as predicted, is outside its legal
+   reachable set at the potential collision (its ``LegalCorridor``: between full
+   braking and accelerating up to its speed limit, within its lane, before a stop
+   line), the collision arises from its violation and k is responsible;
 3. rear-end: the follower of a rear-end collision is responsible.
 
 The collision geometry is taken at the step of the highest collision probability.
@@ -23,10 +24,12 @@ from .config import ResponsibilityConfig
 from .environment import RoadEnvironment
 from .harm import impact_angles
 from .prediction import Prediction
-from .road_users import LegalCorridor, RoadUser, RoadUserType, Shape
+from .road_users import LegalCorridor, RoadUser, RoadUserType
 from .sampling import Candidates
 
 _FRONT = np.pi / 4
+#: Slack of the legal-set test [m], so that rounding never makes a legal road user responsible.
+_LEGAL_TOLERANCE = 0.1
 _REAR = 3 * np.pi / 4
 
 #: Legal speed [m/s] and lateral freedom [m] of road users without a given corridor.
@@ -119,7 +122,6 @@ def responsibilities(
     probability: np.ndarray,
     prediction: Prediction,
     corridors: LegalCorridors,
-    ego_shape: Shape,
     ego_mass: float,
     config: ResponsibilityConfig,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -130,7 +132,7 @@ def responsibilities(
         probability: p_k(u, t), shape (n, k, t).
         prediction: k road users.
         corridors: their legal corridors.
-        ego_shape, ego_mass: the ego's footprint and mass [kg].
+        ego_mass: [kg].
         config: magnitudes.
 
     Returns:
@@ -160,20 +162,18 @@ def responsibilities(
     r_ego = r_ego + np.where(ego_follows, config.rear_end, 0.0)
     r_obs = r_obs + np.where(obs_follows, config.rear_end, 0.0)
 
-    # Traffic rules: can k legally be where it would have to be to collide?
+    # Traffic rules: does k's predicted motion up to the potential collision leave its
+    # legal reachable set? Then the collision arises from k's violation (a jaywalker
+    # entering the road, a red-light runner past the stop line, a speeder).
     c0, s0 = np.cos(corridors.yaw0), np.sin(corridors.yaw0)
-    dx, dy = ex - corridors.x0, ey - corridors.y0
+    dx, dy = ox - corridors.x0, oy - corridors.y0
     lon = dx * c0 + dy * s0
     lat = -dx * s0 + dy * c0
-    rel = eyaw - corridors.yaw0
-    half_lon = 0.5 * (np.abs(ego_shape.length * np.cos(rel)) + np.abs(ego_shape.width * np.sin(rel)))
-    half_lat = 0.5 * (np.abs(ego_shape.length * np.sin(rel)) + np.abs(ego_shape.width * np.cos(rel)))
     lowest, highest = corridors.longitudinal_bounds(candidates.t[step])
-    reach_lon = 0.5 * prediction.length
     legal = (
-        (lon - half_lon <= highest + reach_lon)
-        & (lon + half_lon >= lowest - reach_lon)
-        & (np.abs(lat) - half_lat <= corridors.lateral_half_width + 0.5 * prediction.width)
+        (lon <= highest + _LEGAL_TOLERANCE)
+        & (lon >= lowest - _LEGAL_TOLERANCE)
+        & (np.abs(lat) <= corridors.lateral_half_width + _LEGAL_TOLERANCE)
     )
     r_obs = r_obs + np.where(legal, 0.0, config.rule_violation)
     # Without any chance of collision there is nothing to be responsible for beyond the base.

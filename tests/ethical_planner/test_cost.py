@@ -1,0 +1,65 @@
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from ethical_planner.config import CostWeights
+from ethical_planner.cost import bayes, equality, maximin, responsibility, total_cost
+from ethical_planner.validity import Validity
+
+risk_rows = arrays(np.float64, st.tuples(st.integers(1, 4), st.integers(0, 9)), elements=st.floats(0, 1))
+
+
+def _equality_scalar(row):
+    pairs = list(itertools.combinations(row, 2))
+    return sum(abs(a - b) for a, b in pairs) / len(pairs) if pairs else 0.0
+
+
+@settings(max_examples=100, deadline=None)
+@given(risk_rows)
+def test_equality_matches_all_pairs(risks):
+    expected = [_equality_scalar(list(row)) for row in risks]
+    np.testing.assert_allclose(equality(risks), expected, atol=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(risk_rows)
+def test_bayes_is_the_mean_and_responsibility_never_exceeds_it(risks):
+    expected = [float(np.mean(row)) if len(row) else 0.0 for row in risks]
+    np.testing.assert_allclose(bayes(risks), expected)
+    r = np.full_like(risks, 0.9)
+    assert np.all(responsibility(risks, r) <= bayes(risks) + 1e-15)
+
+
+def test_hand_computed_principles():
+    risks = np.array([[0.1, 0.3, 0.0]])
+    assert bayes(risks)[0] == pytest.approx(0.4 / 3)
+    # pairs: |0.1-0.3| + |0.1-0| + |0.3-0| = 0.6, three pairs
+    assert equality(risks)[0] == pytest.approx(0.2)
+    harms = np.array([[0.5, 0.8, 0.9]])
+    counted = np.array([[True, True, False]])  # 0.9 has negligible probability
+    assert maximin(harms, counted, gamma=2.0)[0] == pytest.approx(0.64)
+    assert responsibility(risks, np.array([[0.5, 0.0, 0.2]]))[0] == pytest.approx(0.05 / 3)
+
+
+def test_total_cost_uses_eq5_for_valid_and_eq6_otherwise():
+    weights = CostWeights(risk=10.0, bayes=1.0, equality=0.0, maximin=0.0, jerk_lon=1.0,
+                          jerk_lat=0.0, speed=2.0, path_distance=0.0)
+    risks = np.array([[0.2], [0.2]])
+    zeros = np.zeros((2, 1))
+    costs = total_cost(
+        risks, zeros, zeros, zeros.astype(bool), np.zeros(2), np.array([3.0, 3.0]), np.zeros(2),
+        np.array([1.5, 1.5]), np.zeros(2), np.array([Validity.VALID, Validity.COLLISION]), weights,
+    )
+    assert costs.total[0] == pytest.approx(10 * 0.2 + 3.0 + 2 * 1.5)
+    assert costs.total[1] == pytest.approx(0.2)
+    assert costs.row(0)["comfort"] == pytest.approx(3.0)
+
+
+def test_empty_risk_set_costs_nothing():
+    empty = np.zeros((3, 0))
+    assert np.all(bayes(empty) == 0) and np.all(equality(empty) == 0)
+    assert np.all(maximin(empty, empty.astype(bool), 10.0) == 0)

@@ -1,0 +1,128 @@
+import json
+import math
+
+import numpy as np
+import pytest
+
+from ethical_planner.collision_probability import collision_probability
+from ethical_planner.config import preset
+from ethical_planner.environment import RoadEnvironment
+from ethical_planner.harm import collision_harm
+from ethical_planner.planner import Planner
+from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, KinematicState, RoadUser, RoadUserType
+from ethical_planner.situations import oncoming_in_ego_lane_with_pedestrian, overtaking_cyclist
+from ethical_planner.validity import Validity
+
+
+def test_maximum_acceptable_risk_forbids_the_risky_overtake():
+    """Paper Fig. 3: without R_max the risk-blind planner squeezes past the cyclist; with it, it stays behind."""
+    situation = overtaking_cyclist()
+    r_max = 0.01
+    base = preset("standard").with_overrides({"sampling": {"horizons": [3.0]}})
+    cyclist_end_x = situation.road_users[0].state.x + 4.0 * 3.0
+
+    free = Planner(base.with_overrides({"risk": {"max_acceptable_risk": 1.0}}), situation.environment)
+    risky = free.plan(situation.ego, situation.road_users)
+    assert risky.trajectory.x[-1] > cyclist_end_x  # it passes the cyclist
+    assert risky.road_users[0].risk > r_max
+
+    bounded = Planner(base.with_overrides({"risk": {"max_acceptable_risk": r_max}}), situation.environment)
+    safe = bounded.plan(situation.ego, situation.road_users)
+    assert safe.level == Validity.VALID
+    assert safe.level_counts[int(Validity.ABOVE_MAX_RISK)] > 0  # overtakes were there, and refused
+    assert safe.trajectory.x[-1] < cyclist_end_x - 2.0  # stays behind
+    assert max(u.risk for u in safe.road_users) <= r_max and safe.ego_combined_risk <= r_max
+
+
+def test_selfish_shifts_risk_to_the_pedestrian_where_ethical_does_not():
+    situation = oncoming_in_ego_lane_with_pedestrian()
+    decisions = {
+        name: Planner(preset(name), situation.environment).plan(situation.ego, situation.road_users)
+        for name in ("ethical", "selfish")
+    }
+    pedestrian = {name: d.road_users[0] for name, d in decisions.items()}
+    assert pedestrian["selfish"].risk > 10 * pedestrian["ethical"].risk
+    assert decisions["selfish"].ego_combined_risk < decisions["ethical"].ego_combined_risk
+    assert decisions["selfish"].trajectory.y.min() < -2.0  # swerves onto the shoulder
+
+
+def test_empty_road_has_zero_risk_and_a_valid_plan():
+    env = RoadEnvironment.along_path([[-20, 0], [300, 0]], lanes_left=1)
+    decision = Planner(preset("ethical"), env).plan(KinematicState(0, 0, 0, 10), [])
+    assert decision.level == Validity.VALID
+    assert decision.ego_combined_risk == 0.0 and decision.road_users == ()
+    assert all(math.isfinite(v) for v in decision.costs.values())
+    assert decision.costs["bayes"] == 0.0 and decision.costs["equality"] == 0.0
+
+
+def test_never_returns_nothing_emergency_braking_when_everything_is_invalid():
+    env = RoadEnvironment.along_path([[-20, 0], [300, 0]], lanes_left=1)
+    config = preset("ethical").with_overrides({"vehicle": {"v_max": 5.0}})  # ego already faster
+    decision = Planner(config, env).plan(KinematicState(0, 0, 0, 10), [])
+    assert decision.emergency and decision.chosen_index == -1
+    assert "emergency braking" in decision.reason
+    assert decision.trajectory.v[-1] < decision.trajectory.v[0]
+
+
+def test_decision_record_is_complete_and_json_able():
+    situation = overtaking_cyclist()
+    decision = Planner(preset("ethical"), situation.environment).plan(situation.ego, situation.road_users)
+    assert sum(decision.level_counts.values()) == len(decision.candidate_levels) == 225
+    record = json.loads(json.dumps(decision.to_dict()))
+    assert {"bayes", "equality", "maximin", "responsibility", "risk", "comfort", "mobility", "total"} <= set(
+        record["costs"]
+    )
+    assert [u["id"] for u in record["road_users"]] == [1, 2]
+    assert record["timings_ms"]["total"] > 0
+    assert "level" in decision.summary()
+
+
+def test_risk_of_the_chosen_plan_matches_a_scalar_recomputation():
+    """Vectorised risk (Eq. 3) against a loop over steps with single-triple calls."""
+    situation = overtaking_cyclist(cyclist_ahead=8.0)
+    planner = Planner(preset("standard"), situation.environment)
+    decision = planner.plan(situation.ego, situation.road_users)
+    traj, pred = decision.trajectory, decision.prediction
+    for k, user in enumerate(situation.road_users):
+        best = 0.0
+        for t in range(len(traj.t)):
+            p = collision_probability(
+                traj.x[None, [t]], traj.y[None, [t]], traj.yaw[None, [t]], EGO_SHAPE.length, EGO_SHAPE.width,
+                pred.mean[[k]][:, [t]], pred.cov[[k]][:, [t]], pred.heading[[k]][:, [t]],
+                pred.length[[k]], pred.width[[k]],
+            ).probability[0, 0, 0]
+            if p == 0.0:
+                continue
+            harm = collision_harm(
+                1475.0, [traj.v[t] * math.cos(traj.yaw[t]), traj.v[t] * math.sin(traj.yaw[t])],
+                [traj.x[t], traj.y[t]], traj.yaw[t], user.mass,
+                [pred.speed[k, t] * math.cos(pred.heading[k, t]), pred.speed[k, t] * math.sin(pred.heading[k, t])],
+                pred.mean[k, t], pred.heading[k, t], np.array(user.is_vulnerable),
+            ).harm_obs
+            best = max(best, float(p * harm))
+        assert decision.road_users[k].risk == pytest.approx(best, rel=1e-9, abs=1e-15)
+
+
+@pytest.mark.parametrize("field,value", [("x", math.nan), ("v", math.inf)])
+def test_bad_ego_state_is_rejected(field, value):
+    kwargs = {"x": 0.0, "y": 0.0, "yaw": 0.0, "v": 5.0, field: value}
+    with pytest.raises(ValueError, match=f"KinematicState.{field}"):
+        KinematicState(**kwargs)
+
+
+def test_reference_path_shorter_than_the_horizon_is_extended_straight():
+    env = RoadEnvironment.along_path([[-5, 0], [10, 0]], lanes_left=1)
+    car = RoadUser(1, RoadUserType.CAR, KinematicState(40, 3.5, math.pi, 10), DEFAULT_SHAPES[RoadUserType.CAR])
+    decision = Planner(preset("ethical"), env).plan(KinematicState(0, 0, 0, 12), [car])
+    assert np.all(np.isfinite(decision.trajectory.x)) and decision.trajectory.x[-1] > 10
+    assert all(math.isfinite(v) for v in decision.costs.values())
+    # Beyond the mapped road the footprint leaves the drivable area: a defined level, not a crash.
+    assert decision.level in {int(level) for level in Validity}
+
+
+def test_bad_planner_arguments():
+    env = RoadEnvironment.along_path([[0, 0], [10, 0]])
+    with pytest.raises(ValueError, match="ego_mass"):
+        Planner(preset("ethical"), env, ego_mass=0.0)
+    with pytest.raises(ValueError, match="config"):
+        Planner({"weights": {}}, env)

@@ -1,0 +1,42 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ethical_planner.reference_path import ReferencePath
+
+
+def test_arc_length_and_curvature_of_a_circle():
+    theta = np.linspace(0, np.pi / 2, 40)
+    radius = 30.0
+    path = ReferencePath.from_polyline(np.c_[radius * np.cos(theta), radius * np.sin(theta)])
+    assert path.length == pytest.approx(np.pi / 2 * radius, rel=1e-4)
+    inner = slice(len(path.s) // 10, -len(path.s) // 10)
+    np.testing.assert_allclose(path.kappa[inner], 1 / radius, rtol=6e-3)  # spline ripple
+
+
+@settings(max_examples=50, deadline=None)
+@given(s=st.floats(-10, 110), d=st.floats(-5, 5))
+def test_frenet_round_trip_on_gentle_curve(s, d):
+    x = np.linspace(0, 100, 30)
+    path = ReferencePath.from_polyline(np.c_[x, 3 * np.sin(x / 30)])
+    xs, ys = path.to_cartesian(np.array([s]), np.array([d]))
+    s2, d2 = path.to_frenet(xs, ys)
+    assert s2[0] == pytest.approx(s, abs=1e-2)
+    assert d2[0] == pytest.approx(d, abs=1e-2)
+
+
+def test_straight_extension_beyond_the_ends():
+    path = ReferencePath.from_polyline([[0, 0], [10, 0]])
+    x, y = path.to_cartesian(np.array([15.0, -5.0]), np.array([1.0, -1.0]))
+    np.testing.assert_allclose(x, [15, -5])
+    np.testing.assert_allclose(y, [1, -1])
+
+
+@pytest.mark.parametrize(
+    "points,match",
+    [([[0, 0]], "shape"), ([[0, 0], [np.nan, 1]], "finite"), ([[0, 0], [0, 0], [1, 1]], "repeat")],
+)
+def test_bad_polylines_are_rejected(points, match):
+    with pytest.raises(ValueError, match=match):
+        ReferencePath.from_polyline(points)
