@@ -1,0 +1,189 @@
+"""Flat table rows of measured-versus-predicted impacts, and their CSV file.
+
+One row per impact, the same columns for controlled sweeps and for collisions of
+closed-loop runs. Both are built from the JSON shape of
+``mujoco_world.compare.ImpactRecord.to_dict`` (the ``collisions`` entries of a run's
+``summary.json``), so the two sources are compared identically.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, RoadUserType
+
+from .geometry import STATIC, Footprint, classify, offset_fraction
+
+#: Identification and design columns (sweep design values; derived for runs).
+KEY_COLUMNS = (
+    "id", "source", "partner", "closing_speed", "angle_deg", "offset", "restitution_set",
+    "class", "status",
+)  # fmt: skip
+_BODY_FIELDS = (
+    "type", "mass", "speed", "dv_measured", "dv_com", "dv_predicted", "dv_error",
+    "area_measured", "area_predicted", "clock_measured", "clock_predicted",
+    "model", "harm_measured", "harm_predicted",
+)  # fmt: skip
+#: Every column of ``impacts.csv``, in order.
+COLUMNS = (
+    KEY_COLUMNS
+    + tuple(f"{f}_{s}" for s in ("a", "b") for f in _BODY_FIELDS)
+    + ("restitution", "duration", "peak_force", "max_penetration")
+)
+_TEXT = frozenset(
+    {"id", "source", "partner", "restitution_set", "class", "status"}
+    | {f"{f}_{s}" for s in ("a", "b") for f in ("type", "area_measured", "area_predicted", "model")}
+)
+
+Row = dict[str, Any]
+
+
+def _num(value: Any) -> float:
+    return math.nan if value is None else float(value)
+
+
+def _footprint(body: Mapping[str, Any]) -> Footprint:
+    kind = RoadUserType(body["type"])
+    shape = EGO_SHAPE if body.get("entity") == 0 else DEFAULT_SHAPES[kind]
+    return Footprint(shape.length, shape.width, kind is RoadUserType.PEDESTRIAN)
+
+
+def _is_static(body: Mapping[str, Any]) -> bool:
+    return body.get("entity") == -1 or body.get("mass") is None
+
+
+def row_from_record(
+    record: Mapping[str, Any], *, source: str, design: Mapping[str, Any] | None = None
+) -> Row:
+    """Flatten one ``ImpactRecord.to_dict()`` into a table row.
+
+    Args:
+        record: dict with keys ``measurement`` and ``comparison`` as in ``summary.json``.
+        source: where it came from (sweep case id or run folder).
+        design: sweep design values (``id``, ``partner``, ``closing_speed`` [m/s],
+            ``angle_deg`` [deg], ``offset`` [-], ``restitution_set``); derived from the
+            pre-impact states when None.
+
+    Returns:
+        A dict with every column of ``COLUMNS``.
+
+    Raises:
+        ValueError: a required key is missing; the message names it.
+    """
+    try:
+        meas = record["measurement"]
+        comp = record["comparison"]
+        bodies = {"a": meas["a"], "b": meas["b"]}
+        comps = {"a": comp["a"], "b": comp["b"]}
+    except (KeyError, TypeError) as error:
+        raise ValueError(f"{source}: collision record lacks key {error}") from None
+    row: Row = {c: math.nan for c in COLUMNS}
+    for side in ("a", "b"):
+        body, c = bodies[side], comps[side]
+        row[f"type_{side}"] = body.get("type", "")
+        row[f"mass_{side}"] = _num(body.get("mass"))
+        row[f"speed_{side}"] = float(np.hypot(*body["velocity"]))
+        for field in (
+            "dv_measured", "dv_com", "dv_predicted", "dv_error", "clock_measured", "clock_predicted",
+            "harm_measured", "harm_predicted",
+        ):  # fmt: skip
+            row[f"{field}_{side}"] = _num(c.get(field))
+        for field in ("area_measured", "area_predicted"):
+            row[f"{field}_{side}"] = c.get(field) or ""
+        row[f"model_{side}"] = c.get("model") or ""
+    for field in ("restitution", "duration", "peak_force", "max_penetration"):
+        row[field] = _num(meas.get(field))
+    row["status"] = "ok" if meas.get("complete", True) else "incomplete"
+    if design is not None:
+        row.update(design)
+        row["source"] = source
+        return row
+    a, b = bodies["a"], bodies["b"]
+    va, vb = np.asarray(a["velocity"], float), np.asarray(b["velocity"], float)
+    rel_vel = vb - va
+    row["id"] = f"{source}#{meas.get('time', 0.0):.3f}:{a.get('name')}-{b.get('name')}"
+    row["source"] = source
+    row["closing_speed"] = float(np.hypot(*rel_vel))
+    row["restitution_set"] = "run"
+    if _is_static(b):
+        row["partner"] = b.get("type") or STATIC
+        row["class"] = STATIC
+        return row
+    row["partner"] = b["type"]
+    sa, sb = np.hypot(*va), np.hypot(*vb)
+    if sa > 1e-6 and sb > 1e-6:
+        cos = float(np.dot(va, vb) / (sa * sb))
+        row["angle_deg"] = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+    else:  # one body at rest: the direction of approach replaces its heading
+        moving, yaw = (va, b["yaw"]) if sa > sb else (vb, a["yaw"])
+        direction = math.atan2(moving[1], moving[0])
+        diff = abs(math.remainder(direction - yaw, 2 * math.pi))
+        row["angle_deg"] = math.degrees(diff)
+    rel_pos = np.asarray(b["position"], float) - np.asarray(a["position"], float)
+    row["offset"] = offset_fraction(_footprint(a), a["yaw"], _footprint(b), b["yaw"], rel_pos, rel_vel)
+    row["class"] = classify(row["angle_deg"], row["offset"])
+    return row
+
+
+def write_rows(path: Path, rows: Iterable[Row], append: bool = False) -> int:
+    """Write rows to a CSV with the header ``COLUMNS`` (appended without header if ``append``).
+
+    Returns:
+        The number of rows written.
+    """
+    mode = "a" if append and path.exists() else "w"
+    count = 0
+    with path.open(mode, newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=COLUMNS, extrasaction="ignore")
+        if mode == "w":
+            writer.writeheader()
+        for row in rows:
+            writer.writerow({k: _fmt(row.get(k, math.nan)) for k in COLUMNS})
+            count += 1
+    return count
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else repr(value)
+    return str(value)
+
+
+def read_rows(path: Path) -> list[Row]:
+    """Read an ``impacts.csv``; numeric columns become floats.
+
+    Raises:
+        ValueError: the header lacks a column of ``COLUMNS`` (named) or a number is malformed.
+    """
+    with path.open(newline="", encoding="utf-8") as handle:
+        reader = csv.DictReader(handle)
+        missing = [c for c in COLUMNS if c not in (reader.fieldnames or ())]
+        if missing:
+            raise ValueError(f"{path}: missing columns {missing}")
+        rows = []
+        for line, raw in enumerate(reader, start=2):
+            row: Row = {}
+            for key in COLUMNS:
+                text = raw[key]
+                if key in _TEXT:
+                    row[key] = text
+                    continue
+                try:
+                    row[key] = float(text)
+                except (TypeError, ValueError):
+                    raise ValueError(
+                        f"{path} line {line}: column {key!r} is not a number: {text!r}"
+                    ) from None
+            rows.append(row)
+    return rows
+
+
+def column(rows: Sequence[Row], key: str) -> np.ndarray:
+    """One numeric column as a float array, shape (n_rows,)."""
+    return np.array([float(r[key]) for r in rows], dtype=float)

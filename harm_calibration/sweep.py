@@ -1,0 +1,262 @@
+"""Controlled two-body impact sweeps in the MuJoCo world.
+
+Body a is the default ego (BMW 320i, 1475 kg); body b is a partner of each type.
+Every ``ImpactCase`` is launched with ``mujoco_world.impact.ImpactRig`` (one compiled
+rig per partner and restitution setting and process), compared with the planner's
+model by ``mujoco_world.compare.compare_impact`` and flattened into a row.
+
+The full grid runs on a spawn-safe process pool and is resumable: cases whose id is
+already in ``impacts.csv`` are skipped and new rows are appended as they finish.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+import multiprocessing
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+from pathlib import Path
+
+from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUserType
+from mujoco_world.compare import compare_impact
+from mujoco_world.impact import ImpactRig
+from mujoco_world.scenario import ContactSpec, RestitutionSpec
+from mujoco_world.scene import BodyProxy
+
+from .geometry import Footprint, classify, launch_geometry, speeds_for_closing
+from .rows import COLUMNS, Row, read_rows, row_from_record, write_rows
+
+#: Partner types of the sweep (car-cyclist is the bicycle type).
+PARTNERS = ("car", "truck", "bus", "motorcycle", "bicycle", "pedestrian")
+#: Largest partner speed [m/s]; vehicles drive at half the closing speed.
+PARTNER_SPEED_CAP = {"pedestrian": 2.0, "bicycle": 6.0, "motorcycle": 20.0}
+#: Restitution settings: name -> coefficient (None: the world's near-plastic default, e ~ 0.01).
+RESTITUTION_SETS: dict[str, float | None] = {"plastic": None, "e0.1": 0.1, "e0.2": 0.2, "e0.4": 0.4}
+
+
+class Grid(StrEnum):
+    """Named sweep grids."""
+
+    SMALL = "small"
+    FULL = "full"
+
+
+@dataclass(frozen=True, slots=True)
+class GridSpec:
+    """Axes of a sweep grid (the cartesian product is swept).
+
+    Attributes:
+        closing_speeds: relative speeds [m/s]. angles_deg: angles between the velocity
+        directions [deg]. offsets: lateral offsets as a fraction of the edge offset.
+        partners: partner types. restitution_sets: keys of ``RESTITUTION_SETS``.
+    """
+
+    closing_speeds: tuple[float, ...]
+    angles_deg: tuple[float, ...]
+    offsets: tuple[float, ...]
+    partners: tuple[str, ...]
+    restitution_sets: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        for name in ("closing_speeds", "angles_deg", "offsets", "partners", "restitution_sets"):
+            if not getattr(self, name):
+                raise ValueError(f"GridSpec.{name} must not be empty")
+        if min(self.closing_speeds) <= 0:
+            raise ValueError(f"GridSpec.closing_speeds must be > 0 [m/s], got {self.closing_speeds}")
+        if not all(0.0 <= a <= 180.0 for a in self.angles_deg):
+            raise ValueError(f"GridSpec.angles_deg must lie in [0, 180], got {self.angles_deg}")
+        if not all(0.0 <= o < 1.0 for o in self.offsets):
+            raise ValueError(f"GridSpec.offsets must lie in [0, 1), got {self.offsets}")
+        bad = [p for p in self.partners if p not in PARTNERS]
+        if bad:
+            raise ValueError(f"GridSpec.partners: unknown {bad}; allowed: {PARTNERS}")
+        bad = [r for r in self.restitution_sets if r not in RESTITUTION_SETS]
+        if bad:
+            raise ValueError(f"GridSpec.restitution_sets: unknown {bad}; allowed: {tuple(RESTITUTION_SETS)}")
+
+    def cases(self) -> list[ImpactCase]:
+        """Every case of the grid, in a fixed order."""
+        return [
+            ImpactCase(p, c, a, o, r)
+            for r, p, c, a, o in itertools.product(
+                self.restitution_sets, self.partners, self.closing_speeds, self.angles_deg, self.offsets
+            )
+        ]
+
+
+GRIDS = {
+    Grid.SMALL: GridSpec(
+        closing_speeds=(3.0, 10.0, 20.0, 30.0),
+        angles_deg=(0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0),
+        offsets=(0.0, 0.5),
+        partners=PARTNERS,
+        restitution_sets=("plastic", "e0.2"),
+    ),
+    Grid.FULL: GridSpec(
+        closing_speeds=tuple(float(v) for v in range(2, 31, 2)),
+        angles_deg=tuple(float(a) for a in range(0, 181, 15)),
+        offsets=(0.0, 0.25, 0.5, 0.75),
+        partners=PARTNERS,
+        restitution_sets=tuple(RESTITUTION_SETS),
+    ),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class ImpactCase:
+    """One controlled impact.
+
+    Attributes:
+        partner: type of body b. closing_speed: |v_a - v_b| [m/s].
+        angle_deg: angle between the velocity directions [deg], 0 rear-end, 180 head-on.
+        offset: lateral offset, fraction of the edge offset. restitution_set: key of
+        ``RESTITUTION_SETS``.
+    """
+
+    partner: str
+    closing_speed: float
+    angle_deg: float
+    offset: float
+    restitution_set: str
+
+    @property
+    def id(self) -> str:
+        """Stable identifier (the resume key in ``impacts.csv``)."""
+        return (
+            f"{self.partner}|v{self.closing_speed:g}|a{self.angle_deg:g}|o{self.offset:g}"
+            f"|{self.restitution_set}"
+        )
+
+    def design(self) -> dict[str, object]:
+        """Design columns of the row."""
+        return {
+            "id": self.id,
+            "partner": self.partner,
+            "closing_speed": float(self.closing_speed),
+            "angle_deg": float(self.angle_deg),
+            "offset": float(self.offset),
+            "restitution_set": self.restitution_set,
+            "class": classify(self.angle_deg, self.offset),
+        }
+
+
+def ego_proxy() -> BodyProxy:
+    """The default ego as a rig body (BMW 320i)."""
+    return BodyProxy("ego", RoadUserType.CAR, EGO_SHAPE.length, EGO_SHAPE.width, EGO_MASS_KG)
+
+
+def contact_for(partner: str, restitution_set: str) -> ContactSpec:
+    """Contact model of a restitution setting between the ego (car) and ``partner``."""
+    e = RESTITUTION_SETS[restitution_set]
+    if e is None:
+        return ContactSpec()
+    return ContactSpec(restitution=(RestitutionSpec(RoadUserType.CAR, RoadUserType(partner), e),))
+
+
+@functools.lru_cache(maxsize=32)
+def _rig(partner: str, restitution_set: str) -> ImpactRig:
+    """Rig of this process for a partner and restitution setting (compiled once)."""
+    return ImpactRig(
+        ego_proxy(), BodyProxy.of_type("partner", partner), contact=contact_for(partner, restitution_set)
+    )
+
+
+def run_case(case: ImpactCase) -> Row:
+    """Launch one impact and return its row (status "miss" or "error: ..." on failure)."""
+    design = case.design()
+    try:
+        shape = DEFAULT_SHAPES[RoadUserType(case.partner)]
+        partner_speed = min(0.5 * case.closing_speed, PARTNER_SPEED_CAP.get(case.partner, math.inf))
+        alpha = math.radians(case.angle_deg)
+        speed_a, speed_b = speeds_for_closing(case.closing_speed, alpha, partner_speed)
+        launch = launch_geometry(
+            Footprint(EGO_SHAPE.length, EGO_SHAPE.width),
+            Footprint(shape.length, shape.width, case.partner == "pedestrian"),
+            speed_a,
+            speed_b,
+            alpha,
+            case.offset,
+        )
+        rig = _rig(case.partner, case.restitution_set)
+        measurement = rig.launch(
+            KinematicState(0.0, 0.0, 0.0, speed_a),
+            KinematicState(launch.position_b[0], launch.position_b[1], launch.yaw_b, speed_b),
+            max_time=launch.time_to_contact + 1.5,
+            velocity_a=launch.velocity_a,
+            velocity_b=launch.velocity_b,
+        )
+    except Exception as error:  # noqa: BLE001 - one failed case must not end a sweep
+        row = {c: math.nan for c in COLUMNS} | design
+        row.update(source="sweep", status=f"error: {type(error).__name__}: {error}")
+        return row
+    if measurement is None:
+        row = {c: math.nan for c in COLUMNS} | design
+        row.update(source="sweep", status="miss")
+        return row
+    return row_from_record(compare_impact(measurement).to_dict(), source="sweep", design=design)
+
+
+def run_sweep(
+    cases: Sequence[ImpactCase],
+    csv_path: Path,
+    workers: int = 2,
+    progress: bool = True,
+    on_row: Callable[[Row], None] | None = None,
+) -> list[Row]:
+    """Run the cases not yet in ``csv_path``, appending their rows; return all rows.
+
+    Args:
+        cases: impacts to run.
+        csv_path: ``impacts.csv``; existing rows with a case's id are kept and skipped.
+        workers: processes (spawn context); 1 runs in this process.
+        progress: show a tqdm progress bar.
+        on_row: called with every new row.
+
+    Returns:
+        Rows of all requested cases (existing ones read back from the CSV), in case order.
+    """
+    existing = {r["id"]: r for r in read_rows(csv_path)} if csv_path.exists() else {}
+    todo = [c for c in cases if c.id not in existing]
+    new: dict[str, Row] = {}
+    if todo:
+        write_rows(csv_path, [], append=bool(existing))
+        bar = _progress(len(todo), progress)
+        for row in _map(todo, workers):
+            write_rows(csv_path, [row], append=True)
+            new[row["id"]] = row
+            if on_row is not None:
+                on_row(row)
+            bar.update(1)
+        bar.close()
+    merged = existing | new
+    return [merged[c.id] for c in cases]
+
+
+def _map(cases: Sequence[ImpactCase], workers: int) -> Iterable[Row]:
+    if workers <= 1 or len(cases) < 8:
+        yield from map(run_case, cases)
+        return
+    # Group by rig so each process compiles few models; chunks keep the bar moving.
+    ordered = sorted(cases, key=lambda c: (c.restitution_set, c.partner))
+    context = multiprocessing.get_context("spawn")
+    with context.Pool(workers) as pool:
+        yield from pool.imap_unordered(run_case, ordered, chunksize=16)
+
+
+class _NoBar:
+    def update(self, n: int) -> None:
+        """Do nothing."""
+
+    def close(self) -> None:
+        """Do nothing."""
+
+
+def _progress(total: int, enabled: bool):  # noqa: ANN202 - tqdm or a stand-in
+    if not enabled:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="impact", desc="impacts")
