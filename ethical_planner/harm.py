@@ -28,6 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import expit
 
+from .dv_correction import DeltaVCorrection, impact_offset_fraction, velocity_angle
+
 _TWO_PI = 2.0 * math.pi
 
 
@@ -667,6 +669,10 @@ def collision_harm(
     obs_unprotected: ArrayLike,
     model: HarmModel | str = DEFAULT_MODEL,
     pedestrian_model: HarmModel | str = DEFAULT_PEDESTRIAN_MODEL,
+    *,
+    dv_correction: DeltaVCorrection | None = None,
+    ego_shape: tuple[ArrayLike, ArrayLike] | None = None,
+    obs_shape: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> CollisionHarm:
     """Harm of the ego and of another road user if they collide in the given states.
 
@@ -674,6 +680,11 @@ def collision_harm(
     both harms by ``model``, each with its own impact angle. An unprotected partner
     (pedestrian, cyclist, motorcyclist): its harm by ``pedestrian_model``, the ego's
     harm by the ignore-angle model (SPEC section 3).
+
+    With ``dv_correction``, both delta-v (one impulse) are multiplied by its factor for
+    the angle between the velocity directions (``velocity_angle``) and the impact
+    offset fraction (``impact_offset_fraction``, which needs both shapes) before the
+    harm is evaluated; the returned ``dv_ego`` and ``dv_obs`` are the corrected ones.
 
     Typical planner shapes: ego arrays (n_traj, 1, n_t), other (1, n_obs, n_t),
     vectors with a trailing axis of 2, ``obs_unprotected`` (1, n_obs, 1).
@@ -690,13 +701,19 @@ def collision_harm(
         obs_unprotected: bool array, True where the other road user is unprotected.
         model: harm model of protected road users.
         pedestrian_model: harm model of unprotected road users.
+        dv_correction: optional delta-v correction (None: plain Eq. 1).
+        ego_shape: (length, width) of the ego [m], broadcastable; required with
+            ``dv_correction``, unused without it.
+        obs_shape: (length, width) of the other road user [m], each broadcastable
+            (e.g. shape (1, n_obs, 1)); required with ``dv_correction``, unused without it.
 
     Returns:
         ``CollisionHarm`` with arrays of the broadcast shape (vectors without their last axis).
 
     Raises:
         ValueError: non-positive or non-finite mass, non-finite state, vectors without a
-            last axis of 2, ``obs_unprotected`` not boolean, unknown model.
+            last axis of 2, ``obs_unprotected`` not boolean, unknown model, a shape
+            missing (or not > 0) while ``dv_correction`` is given.
 
     """
     protected_c = coefficients(model)
@@ -710,6 +727,20 @@ def collision_harm(
     dv_ego, dv_obs = delta_v(ego_mass, obs_mass, ego_vel, obs_vel)
     ep = _vectors("ego_pos", ego_pos, "[m]")
     op = _vectors("obs_pos", obs_pos, "[m]")
+    if dv_correction is not None:
+        if ego_shape is None or obs_shape is None:
+            raise ValueError(
+                "collision_harm: dv_correction needs ego_shape=(length, width) and "
+                "obs_shape=(length, width) [m] for the impact offset"
+            )
+        ev = _vectors("ego_vel", ego_vel, "[m/s]")
+        ov = _vectors("obs_vel", obs_vel, "[m/s]")
+        offset = impact_offset_fraction(
+            ep, ev, ego_yaw, ego_shape[0], ego_shape[1], op, ov, obs_yaw, obs_shape[0], obs_shape[1]
+        )
+        factor = dv_correction.factor(velocity_angle(ev, ov, ego_yaw, obs_yaw), offset)
+        dv_ego = dv_ego * factor
+        dv_obs = dv_obs * factor
     ego_angle, obs_angle = impact_angles(
         ep[..., 0], ep[..., 1], ego_yaw, op[..., 0], op[..., 1], obs_yaw
     )

@@ -18,7 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from .calibration import MIN_DV_MS, CalibrationResult, calibrate, error_stats
+from .calibration import (
+    MIN_DV_MS,
+    CalibrationResult,
+    DeltaVCorrection,
+    calibrate,
+    error_stats,
+    row_offset_fractions,
+)
 from .geometry import CLASSES
 from .literature import literature_markdown, literature_table
 from .rows import Row, column
@@ -126,6 +133,7 @@ def summarize(rows: Sequence[Row], rng: np.random.Generator | None = None) -> di
             column(vehicle, "dv_predicted_a"),
             column(vehicle, "dv_measured_a"),
             column(vehicle, "angle_deg"),
+            row_offset_fractions(vehicle),
             [r["class"] for r in vehicle],
             rng,
         )
@@ -156,28 +164,56 @@ def headline_markdown(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+_CALIBRATION_KEYS = ("test_error_eq1", "test_error_angle_only", "test_error_calibrated")
+_CALIBRATION_NAMES = ("Eq. 1", "angle-only", "angle x offset")
+
+
 def _calibration_markdown(cal: dict[str, Any]) -> str:
+    corr = cal["correction"]
     lines = [
-        f"Correction: factor per bin of the angle between velocities, fitted on "
-        f"{100 * (1 - cal['test_fraction']):.0f}% of the impacts (seed {cal['seed']}), "
-        "errors on the held-back rest.",
+        "Correction (`ethical_planner.dv_correction.DeltaVCorrection`): Eq. 1 delta-v times a "
+        "factor per bin of the angle between the velocity directions and the impact offset "
+        "fraction (perpendicular distance of the partner's centre from the approach line through "
+        "the ego's centre, over the sum of the footprints' half-extents; 0 central, 1 grazing), "
+        "the median of measured / Eq. 1 over the training impacts of the bin. Bins with fewer "
+        f"than {cal.get('min_count', '?')} training impacts take the angle-only factor (or 1). "
+        f"Fitted on {100 * (1 - cal['test_fraction']):.0f}% of the impacts (seed {cal['seed']}); "
+        "errors |(measured - model) / model| on the held-back rest.",
         "",
-        "| class | n test | Eq. 1 median | Eq. 1 p95 | calibrated median | calibrated p95 |",
-        "| --- | ---: | ---: | ---: | ---: | ---: |",
+        "| class | n test | Eq. 1 median | Eq. 1 p95 | angle-only median | angle-only p95 "
+        "| angle x offset median | angle x offset p95 |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
+    angle_only = cal.get("test_error_angle_only", {})
     for cls, before in cal["test_error_eq1"].items():
+        mid = angle_only.get(cls, {})
         after = cal["test_error_calibrated"][cls]
         lines.append(
             f"| {cls} | {before['n']} | {_fmt(before['median_abs'], True)} | "
-            f"{_fmt(before['p95_abs'], True)} | "
+            f"{_fmt(before['p95_abs'], True)} | {_fmt(mid.get('median_abs'), True)} | "
+            f"{_fmt(mid.get('p95_abs'), True)} | "
             f"{_fmt(after['median_abs'], True)} | {_fmt(after['p95_abs'], True)} |"
         )
-    corr = cal["correction"]
-    edges = corr["edges_deg"]
-    lines += ["", "| angle bin [deg] | factor | n train |", "| --- | ---: | ---: |"]
-    for k, f in enumerate(corr["factors"]):
-        n = corr["n_train"][k] if corr["n_train"] else "-"
-        lines.append(f"| {edges[k]:g}-{edges[k + 1]:g} | {f:.3f} | {n} |")
+    overall = [cal.get(k, {}).get("all", {}).get("p95_abs_log") for k in _CALIBRATION_KEYS]
+    lines += [
+        "",
+        "p95 of |ln(measured / model)| (weighs under- and overestimates alike), all classes: "
+        + ", ".join(f"{name} {_fmt(v)}" for name, v in zip(_CALIBRATION_NAMES, overall, strict=True))
+        + ".",
+    ]
+    angle_edges, offset_edges = corr["angle_edges_deg"], corr["offset_edges"]
+    counts = corr["n_train"]
+    header = [f"{offset_edges[j]:g}-{offset_edges[j + 1]:g}" for j in range(len(offset_edges) - 1)]
+    lines += [
+        "",
+        "Factor (training impacts) per angle bin [deg] (rows) and offset-fraction bin (columns):",
+        "",
+        "| angle \\ offset | " + " | ".join(header) + " |",
+        "| --- |" + " ---: |" * len(header),
+    ]
+    for i, row in enumerate(corr["factors"]):
+        cells = [f"{f:.3f} ({counts[i][j]})" if counts else f"{f:.3f}" for j, f in enumerate(row)]
+        lines.append(f"| {angle_edges[i]:g}-{angle_edges[i + 1]:g} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -332,9 +368,7 @@ def analyse(
     """Summary, plots, ``summary.json``, ``report.md`` (and ``calibration.json``) in ``out_dir``."""
     summary = summarize(rows, np.random.default_rng(seed))
     if "calibration" in summary:
-        from .calibration import CalibratedDeltaV
-
-        CalibratedDeltaV.from_dict(summary["calibration"]["correction"]).save(out_dir / "calibration.json")
+        DeltaVCorrection.from_dict(summary["calibration"]["correction"]).save(out_dir / "calibration.json")
     names = write_plots(out_dir, rows) if plots else []
     write_summary(out_dir, summary)
     write_report(out_dir, summary, title, names)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+import re
 import types
 import typing
 from collections.abc import Mapping
@@ -119,8 +120,23 @@ def from_mapping(cls: type[T], data: Any, path: str = "") -> T:
     except TypeError as error:  # a required field is missing
         raise ValueError(f"{where}: {error}") from None
     except ValueError as error:
-        message = str(error)
-        raise ValueError(f"{where}: {message}" if path else message) from None
+        raise ValueError(_prefixed(path, str(error))) from None
+
+
+def _prefixed(path: str, message: str) -> str:
+    """Put the dotted ``path`` in front of a record's own message.
+
+    A message that starts with the record's short name ("behaviour.speed ...") gets
+    that name replaced by the full path ("road_users[2].behaviour.speed ...").
+    """
+    if not path:
+        return message
+    leaf = path.rsplit(".", 1)[-1]
+    base = re.sub(r"\[\d+\]$", "", leaf)
+    for name in (base, base.rstrip("s")):
+        if message.startswith(name + "."):
+            return f"{path}.{message[len(name) + 1:]}"
+    return f"{path}: {message}"
 
 
 def _convert(tp: Any, value: Any, path: str) -> Any:

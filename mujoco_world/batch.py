@@ -46,6 +46,8 @@ class RunTask:
     planner: str
     seed: int
     out: str
+    record: bool = True
+    keep: str = "all"
 
     @property
     def run_dir(self) -> Path:
@@ -60,12 +62,12 @@ class RunTask:
 
 
 def resolve_scenario(name: str) -> Scenario:
-    """A catalog scenario by name, or a scenario loaded from a ``.toml`` path."""
-    from .catalog import get_scenario
+    """A scenario from a ``.toml`` path, a catalog name or a generated name (``family-s3-17``)."""
+    from .catalog import scenario_by_name
 
     if name.endswith(".toml") or os.sep in name:
         return load_scenario(name)
-    return get_scenario(name)
+    return scenario_by_name(name)
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:
@@ -124,9 +126,14 @@ def run_task(task: RunTask, config: RunConfig | None = None) -> dict[str, Any]:
             return row
         except (OSError, json.JSONDecodeError):
             pass  # a damaged summary is run again
+    # Imported here: the recorder is the one module that imports Rerun.
+    from .cli_recording import recording_observer
+
     try:
         scenario = resolve_scenario(task.scenario)
-        summary = run_scenario(scenario, task.planner, task.seed, config).to_dict()
+        observer = recording_observer(task.run_dir, keep=task.keep, record=task.record, out_root=task.out)
+        summary = run_scenario(scenario, task.planner, task.seed, config, observer).to_dict()
+        summary["recording"] = observer.row.recording if observer.row is not None else None
     except Exception as error:  # noqa: BLE001 - recorded, the batch goes on
         summary = failed_summary(task, f"{type(error).__name__}: {error}")
     write_json(path, summary)
@@ -138,10 +145,17 @@ def _run_task_in_worker(task: RunTask, config: RunConfig | None) -> dict[str, An
 
 
 def make_tasks(
-    scenarios: Sequence[str], planners: Sequence[str], seeds: Sequence[int], out: str | Path
+    scenarios: Sequence[str],
+    planners: Sequence[str],
+    seeds: Sequence[int],
+    out: str | Path,
+    record: bool = True,
+    keep: str = "all",
 ) -> list[RunTask]:
-    """All combinations, scenario-major."""
-    return [RunTask(s, p, int(seed), str(out)) for s in scenarios for seed in seeds for p in planners]
+    """All combinations, scenario-major; ``record``/``keep`` as in ``recording_observer``."""
+    return [
+        RunTask(s, p, int(seed), str(out), record, keep) for s in scenarios for seed in seeds for p in planners
+    ]
 
 
 def run_batch(
@@ -223,14 +237,14 @@ def comparison_table(rows: Iterable[dict[str, Any]]) -> str:
     """Plain-text table: one line per run, then per-planner totals (paper Figs. 5, 6)."""
     rows = sorted(rows, key=lambda r: (str(r["scenario"]), str(r["planner"]), r["seed"] or 0))
     head = (
-        f"{'scenario':<26} {'planner':<9} {'seed':>4} {'outcome':<8} {'t [s]':>6} {'coll':>4} "
+        f"{'scenario':<30} {'planner':<9} {'seed':>4} {'outcome':<8} {'t [s]':>6} {'coll':>4} "
         f"{'max risk ego':>12} {'3rd':>7} {'VRU':>7} {'harm ego':>9} {'3rd':>6} {'VRU':>6} {'min d':>6}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
         risk, harm = r.get("max_risk") or {}, r.get("harm") or {}
         lines.append(
-            f"{str(r['scenario']):<26} {str(r['planner']):<9} {r['seed']!s:>4} {str(r['outcome']):<8} "
+            f"{str(r['scenario']):<30} {str(r['planner']):<9} {r['seed']!s:>4} {str(r['outcome']):<8} "
             f"{_fmt(r.get('duration'), 1):>6} {r.get('collisions', 0):>4} "
             f"{_fmt(risk.get('ego')):>12} {_fmt(risk.get('third_party')):>7} "
             f"{_fmt(risk.get('vulnerable')):>7} "

@@ -88,26 +88,25 @@ class RouteTable:
         n = int(math.ceil((float(self.length.max(initial=0.0)) + ROUTE_EXTENSION_M) / ROUTE_STEP_M)) + 2
         s = np.arange(n) * ROUTE_STEP_M
         k = len(self.paths)
-        self.x, self.y, self.theta, self.kappa = (np.zeros((k, n)) for _ in range(4))
+        self._table = np.zeros((k, n, 4))  # x, y, theta, kappa
         for i, path in enumerate(self.paths):
             x, y, theta, kappa, _ = path.evaluate(s)
-            self.x[i], self.y[i], self.theta[i], self.kappa[i] = x, y, theta, kappa
+            self._table[i] = np.column_stack([x, y, theta, kappa])
+        self.x, self.y, self.theta, self.kappa = (self._table[:, :, j] for j in range(4))
         self._n = n
 
     def lookup(self, rows: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Pose of routes ``rows`` at arc lengths ``s`` (both shape (m,)).
+        """Pose of routes ``rows`` at arc lengths ``s`` (same shape, any).
 
         Returns:
-            (x, y, theta, kappa), each (m,).
+            (x, y, theta, kappa), each of the shape of ``s``.
         """
         u = np.clip(s, 0.0, (self._n - 1.001) * ROUTE_STEP_M) / ROUTE_STEP_M
         i = u.astype(np.int64)
-        f = u - i
-        out = []
-        for table in (self.x, self.y, self.theta, self.kappa):
-            lo = table[rows, i]
-            out.append(lo + f * (table[rows, i + 1] - lo))
-        return tuple(out)
+        f = (u - i)[..., None]
+        lo = self._table[rows, i]
+        out = lo + f * (self._table[rows, i + 1] - lo)
+        return out[..., 0], out[..., 1], out[..., 2], out[..., 3]
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,7 +161,6 @@ class Fleet:
         self.active = np.ones(self.k, dtype=bool)  # False once crashed
         self._next_tick = 0.0
         self._time = 0.0
-        self._waiting = np.zeros(self.k, dtype=bool)
         self._crossing = np.zeros(self.k, dtype=bool)
         self._delay: list[deque[float] | None] = []
         for u in self.specs:
@@ -170,6 +168,7 @@ class Fleet:
             ticks = int(round(idm.reaction_time / self.tick)) if idm is not None else 0
             self._delay.append(deque([0.0] * ticks) if ticks > 0 else None)
         self._kind = [u.behaviour.kind for u in self.specs]
+        self._is_idm = np.array([k is BehaviourKind.IDM for k in self._kind], dtype=bool)
 
     # ------------------------------------------------------------------ states
 
@@ -204,6 +203,14 @@ class Fleet:
         yaw = theta + np.arctan2(self.d_rate, np.maximum(v, 0.5))
         return p, vel, acc, yaw, v * kappa
 
+    def deactivate(self, mask: np.ndarray) -> None:
+        """Stop the behaviours of crashed road users (``mask`` (k,) bool)."""
+        self.active &= ~mask
+        self.v[mask] = 0.0
+        self.a[mask] = 0.0
+        self.d_rate[mask] = 0.0
+        self.d_accel[mask] = 0.0
+
     # ------------------------------------------------------------------ decisions
 
     def due(self, time: float) -> bool:
@@ -215,6 +222,11 @@ class Fleet:
         t = view.time
         self._next_tick = t + self.tick
         ego_pos = view.position[0]
+        idm_rows = np.flatnonzero(self._is_idm & self.active)
+        leaders = {}
+        if idm_rows.size:
+            gaps, speeds = self._leaders(idm_rows, view)
+            leaders = {int(i): (float(g), float(v)) for i, g, v in zip(idm_rows, gaps, speeds, strict=True)}
         for i, spec in enumerate(self.specs):
             if not self.active[i]:
                 continue
@@ -237,7 +249,7 @@ class Fleet:
             if kind is BehaviourKind.SCRIPTED:
                 self.a[i] = self._scripted(i, since)
             elif kind is BehaviourKind.IDM:
-                self.a[i] = self._idm(i, since, view)
+                self.a[i] = self._idm(i, since, view, *leaders[i])
             else:
                 self.a[i] = self._pedestrian(i, since, view)
 
@@ -251,49 +263,58 @@ class Fleet:
         target = self._target_speed(i, since + self.tick if math.isfinite(since) else since)
         return float(np.clip((target - self.v[i]) / self.tick, -SCRIPTED_ACCEL_LIMIT, SCRIPTED_ACCEL_LIMIT))
 
-    def _ahead(self, i: int, view: WorldView, horizon: float) -> tuple[float, float]:
-        """Gap [m] to and speed [m/s] of the nearest body ahead on route i (inf, 0 if none)."""
-        me = i + 1
-        s0 = self.s[i]
+    def _leaders(self, rows: np.ndarray, view: WorldView) -> tuple[np.ndarray, np.ndarray]:
+        """Gap [m] to and speed [m/s] of the nearest body ahead on the routes of ``rows``.
+
+        Every other body is projected onto the first ``look_ahead`` metres of each
+        route (sampled every metre, refined along the tangent); it leads if it
+        overlaps the route's lane laterally. Vectorised over rows and bodies.
+
+        Returns:
+            (gap, speed), each (m,); inf and 0 where nothing is ahead.
+        """
+        m = len(rows)
+        horizon = max(self.specs[i].behaviour.idm.look_ahead for i in rows)
         samples = np.arange(0.0, horizon + 1e-9, 1.0)
-        x, y, theta, _ = self.routes.lookup(np.full(samples.size, i), s0 + samples)
+        n_s = samples.size
+        x, y, theta, _ = self.routes.lookup(rows[:, None], self.s[rows, None] + samples[None, :])
         pos = view.position
-        others = np.ones(len(pos), dtype=bool)
-        others[me] = False
-        dx = pos[others, 0][:, None] - x[None, :]
-        dy = pos[others, 1][:, None] - y[None, :]
-        dist2 = dx * dx + dy * dy
-        nearest = np.argmin(dist2, axis=1)
-        rows = np.arange(len(nearest))
-        heading = theta[nearest]
-        lateral = np.abs(
-            -dx[rows, nearest] * np.sin(heading) + dy[rows, nearest] * np.cos(heading)
-        )
-        yaw = view.yaw[others]
-        length, width = view.length[others], view.width[others]
-        rel = yaw - heading
+        dx = pos[None, :, 0, None] - x[:, None, :]  # (m, n, n_s)
+        dy = pos[None, :, 1, None] - y[:, None, :]
+        nearest = np.argmin(dx * dx + dy * dy, axis=2)  # (m, n)
+        dxn = np.take_along_axis(dx, nearest[..., None], axis=2)[..., 0]
+        dyn = np.take_along_axis(dy, nearest[..., None], axis=2)[..., 0]
+        heading = np.take_along_axis(theta, nearest, axis=1)
+        c, s = np.cos(heading), np.sin(heading)
+        lateral = np.abs(-dxn * s + dyn * c)
+        rel = view.yaw[None, :] - heading
+        length, width = view.length[None, :], view.width[None, :]
         half_along = 0.5 * (length * np.abs(np.cos(rel)) + width * np.abs(np.sin(rel)))
         half_across = 0.5 * (length * np.abs(np.sin(rel)) + width * np.abs(np.cos(rel)))
-        # Refine the arc length by projecting onto the tangent at the nearest sample.
-        along = samples[nearest] + dx[rows, nearest] * np.cos(heading) + dy[rows, nearest] * np.sin(
-            heading
+        me = rows + 1
+        along = samples[nearest] + dxn * c + dyn * s
+        gap = along - 0.5 * view.length[me, None] - half_along
+        limit = np.array([self.specs[i].behaviour.idm.look_ahead for i in rows])
+        valid = (
+            (lateral < 0.5 * view.width[me, None] + half_across + 0.3)
+            & (nearest > 0)
+            & (nearest < n_s - 1)
+            & (samples[nearest] <= limit[:, None])
         )
-        in_lane = lateral < 0.5 * view.width[me] + half_across + 0.3
-        gap = along - 0.5 * view.length[me] - half_along
-        valid = in_lane & (nearest > 0) & (nearest < samples.size - 1)
-        if not valid.any():
-            return math.inf, 0.0
-        j = int(np.argmin(np.where(valid, gap, np.inf)))
-        vel = view.velocity[others][j]
-        speed = float(vel[0] * math.cos(heading[j]) + vel[1] * math.sin(heading[j]))
-        return float(gap[j]), speed
+        valid[np.arange(m), me] = False
+        gap = np.where(valid, gap, np.inf)
+        j = np.argmin(gap, axis=1)
+        best = gap[np.arange(m), j]
+        vel = view.velocity[j]
+        hj = heading[np.arange(m), j]
+        speed = np.where(np.isfinite(best), vel[:, 0] * np.cos(hj) + vel[:, 1] * np.sin(hj), 0.0)
+        return best, speed
 
-    def _idm(self, i: int, since: float, view: WorldView) -> float:
+    def _idm(self, i: int, since: float, view: WorldView, gap: float, v_lead: float) -> float:
         spec = self.specs[i]
         p = spec.behaviour.idm
         v = float(self.v[i])
         v0 = max(self._target_speed(i, since), 0.1)
-        gap, v_lead = self._ahead(i, view, p.look_ahead)
         if p.stop_at is not None and view.time < p.stop_until:
             line_gap = p.stop_at - self.s[i] - 0.5 * view.length[i + 1]
             if line_gap > v * v / (2.0 * p.max_deceleration) - 0.5 and line_gap < gap:
@@ -323,7 +344,6 @@ class Fleet:
             else:
                 remaining = max(crossing.wait_at - s, 0.0)
                 speed = min(speed, math.sqrt(2.0 * 1.0 * remaining))
-                self._waiting[i] = remaining < 0.3
         elif not self._crossing[i]:
             self._crossing[i] = True
         return float(np.clip((speed - v) / self.tick, -3.0, 1.5))

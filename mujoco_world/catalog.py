@@ -12,6 +12,8 @@ intersection the main road runs from x = -length/2 and the cross road along +y.
 
 from __future__ import annotations
 
+import dataclasses
+import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
@@ -27,6 +29,7 @@ from .scenario import (
     RoadUserSpec,
     RouteSpec,
     Scenario,
+    SensorSpec,
 )
 
 
@@ -128,6 +131,7 @@ def pedestrian_behind_parked(rng: np.random.Generator | None = None) -> Scenario
         name="pedestrian_behind_parked",
         description="a pedestrian steps out from behind a parked van; braking alone is too late",
         road=road,
+        sensor=SensorSpec(occlusion=True),
         ego=EgoSpec(s0=10.0, speed=ego_speed, goal_s=180.0),
         road_users=(van, ped, oncoming),
         duration=20.0,
@@ -311,7 +315,7 @@ def curve_truck(rng: np.random.Generator | None = None) -> Scenario:
 
 
 def dense_urban(rng: np.random.Generator | None = None) -> Scenario:
-    """A busy urban street: traffic both ways, parked cars, cyclists, crossing pedestrians."""
+    """A busy urban street (20 road users): traffic both ways, parked cars, cyclists, pedestrians."""
     draw = _Draw(rng)
     road = RoadSpec(length=300.0, speed_limit=13.9, parking_width=2.5)
     kerb_r = road.half_width + road.parking_width + road.shoulder
@@ -326,6 +330,9 @@ def dense_urban(rng: np.random.Generator | None = None) -> Scenario:
             )
         )
     users.append(_user("bus", "bus", RouteSpec(lane=0), draw(70.0, 60.0, 80.0), _idm(9.0)))
+    users.append(
+        _user("taxi", "taxi", RouteSpec(lane=0), draw(185.0, 175.0, 195.0), _idm(draw(10.0, 8.0, 12.0)))
+    )
     for k, s0 in enumerate((20.0, 60.0, 100.0, 145.0, 190.0, 235.0)):
         kind = draw.choice("car", ["car", "car", "car", "truck", "motorcycle"])
         users.append(
@@ -362,9 +369,9 @@ def dense_urban(rng: np.random.Generator | None = None) -> Scenario:
         name="dense_urban",
         description="urban street with ~20 road users: traffic both ways, parked cars, cyclists, pedestrians",
         road=road,
-        ego=EgoSpec(s0=10.0, speed=draw(10.0, 8.0, 12.0), goal_s=280.0),
+        ego=EgoSpec(s0=10.0, speed=draw(10.0, 8.0, 12.0), goal_s=260.0),
         road_users=tuple(users),
-        duration=35.0,
+        duration=40.0,
     )
 
 
@@ -429,11 +436,7 @@ def random_scenario(family: str, rng: np.random.Generator, name: str | None = No
         name: scenario name; defaults to the family name.
     """
     scenario = get_family(family).build(rng)
-    if name is None:
-        return scenario
-    import dataclasses
-
-    return dataclasses.replace(scenario, name=name)
+    return scenario if name is None else dataclasses.replace(scenario, name=name)
 
 
 def generate_scenarios(
@@ -449,12 +452,32 @@ def generate_scenarios(
     names = list(families) if families is not None else catalog_names()
     if not names:
         raise ValueError("families must name at least one family")
+    for name in generated_names(n, seed, names):
+        yield scenario_by_name(name)
+
+
+_GENERATED = re.compile(r"^(?P<family>[a-z_]+)-s(?P<seed>\d+)-(?P<index>\d+)$")
+
+
+def scenario_by_name(name: str) -> Scenario:
+    """A catalog scenario (``dense_urban``) or a generated one (``dense_urban-s3-17``).
+
+    Generated names are those of ``generate_scenarios``: the scenario is rebuilt from
+    its family, seed and index alone.
+    """
+    match = _GENERATED.match(name)
+    if match is None:
+        return get_scenario(name)
+    seed, index = int(match["seed"]), int(match["index"])
+    return random_scenario(match["family"], np.random.default_rng([seed, index]), name=name)
+
+
+def generated_names(n: int, seed: int, families: Sequence[str] | None = None) -> list[str]:
+    """Names of the scenarios ``generate_scenarios(n, seed, families)`` yields."""
+    names = list(families) if families is not None else catalog_names()
     for family in names:
         get_family(family)
-    for i in range(n):
-        family = names[i % len(names)]
-        rng = np.random.default_rng([seed, i])
-        yield random_scenario(family, rng, name=f"{family}-s{seed}-{i}")
+    return [f"{names[i % len(names)]}-s{seed}-{i}" for i in range(n)]
 
 
 def describe(name: str) -> str:
@@ -472,9 +495,11 @@ __all__ = [
     "catalog_names",
     "describe",
     "generate_scenarios",
+    "generated_names",
     "get_family",
     "get_scenario",
     "random_scenario",
+    "scenario_by_name",
 ]
 
 

@@ -20,7 +20,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Drive the ego with a planner through a MuJoCo scenario; every "
         "collision is measured from the physics and compared with the harm model.",
     )
-    p.add_argument("scenario", help="catalog name (see 'etp scenarios') or a scenario .toml file")
+    p.add_argument(
+        "scenario",
+        help="catalog name (see 'etp scenarios'), a generated name such as dense_urban-s3-17, "
+        "or a scenario .toml file",
+    )
     p.add_argument("--planner", default="ethical", help="ethical, selfish or standard (default ethical)")
     p.add_argument("--seed", type=int, default=0, help="seed of the observation noise (default 0)")
     p.add_argument(
@@ -28,6 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--noise", type=float, default=0.0, help="position noise std [m] of observed road users")
     p.add_argument("--replan-rate", type=float, default=10.0, help="planning cycles per second [Hz]")
+    _recording_arguments(p)
     p.set_defaults(handler=_run)
 
     p = subparsers.add_parser(
@@ -41,10 +46,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true", help="run a small subset of the catalog")
     p.add_argument("--scenarios", default=None, help="comma-separated scenario names")
     p.add_argument("--planners", default="ethical,selfish,standard", help="comma-separated presets")
-    p.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
+    p.add_argument("--seeds", default="0", help="comma-separated run seeds (default 0)")
+    p.add_argument(
+        "--random", type=int, default=0, metavar="N",
+        help="instead of the catalog, run N random variants of the families (see --scenario-seed)",
+    )
+    p.add_argument("--scenario-seed", type=int, default=0, help="seed of the random variants (default 0)")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    _recording_arguments(p)
     p.set_defaults(handler=_demo)
+
+    from . import cli_recording
+
+    cli_recording.register(subparsers)
+
+
+def _recording_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--no-record", action="store_true", help="write no Rerun recording (still indexed)")
+    parser.add_argument(
+        "--keep-recordings", choices=["all", "near-crash"], default="all",
+        help="keep every recording, or only those of near-crash runs (the index lists every run)",
+    )
 
 
 def _split(text: str, what: str) -> list[str]:
@@ -76,9 +99,14 @@ def _run(args: argparse.Namespace) -> int:
     scenario = resolve_scenario(args.scenario)
     config = RunConfig(noise=ObservationNoise(position=args.noise), replan_rate=args.replan_rate)
     out = Path(args.out) if args.out else Path("logs/run") / f"{scenario.name}-{args.planner}-s{args.seed}"
-    summary = run_scenario(scenario, args.planner, args.seed, config)
+    from .cli_recording import recording_observer
+
+    observer = recording_observer(out, keep=args.keep_recordings, record=not args.no_record)
+    summary = run_scenario(scenario, args.planner, args.seed, config, observer)
     path = out / "summary.json"
-    write_json(path, summary.to_dict())
+    data = summary.to_dict()
+    data["recording"] = observer.row.recording if observer.row is not None else None
+    write_json(path, data)
     risk = summary.max_risk
     print(
         f"{scenario.name} [{summary.planner}, seed {summary.seed}]: {summary.outcome} after "
@@ -95,18 +123,27 @@ def _run(args: argparse.Namespace) -> int:
             f"areas {m.a.reduced_area}/{m.b.reduced_area}"
         )
     print(f"wrote {path}")
+    if data["recording"]:
+        print(f"recording: {data['recording']}  (open with: rerun {data['recording']})")
     return 1 if summary.outcome == "failed" else 0
 
 
 def _demo(args: argparse.Namespace) -> int:
     from .batch import QUICK_SCENARIOS, comparison_table, make_tasks, run_batch, write_aggregate
-    from .catalog import catalog_names, get_family
+    from .catalog import catalog_names, generated_names, get_family
 
+    check(args.random >= 0, f"--random must be >= 0, got {args.random}")
+    families = None
     if args.scenarios:
         scenarios = _split(args.scenarios, "--scenarios")
         for name in scenarios:
             if not name.endswith(".toml"):
                 get_family(name)
+        families = scenarios
+    if args.random:
+        scenarios = generated_names(args.random, args.scenario_seed, families)
+    elif args.scenarios:
+        pass
     elif args.quick:
         scenarios = list(QUICK_SCENARIOS)
     else:
@@ -119,7 +156,9 @@ def _demo(args: argparse.Namespace) -> int:
     except ValueError:
         raise ValueError(f"--seeds must be comma-separated integers, got {args.seeds!r}") from None
     check(args.workers >= 1, f"--workers must be >= 1, got {args.workers}")
-    tasks = make_tasks(scenarios, planners, seeds, args.out)
+    tasks = make_tasks(
+        scenarios, planners, seeds, args.out, record=not args.no_record, keep=args.keep_recordings
+    )
     start = time.perf_counter()
     rows = run_batch(tasks, workers=args.workers, progress=not args.no_progress)
     wall = time.perf_counter() - start
@@ -127,4 +166,5 @@ def _demo(args: argparse.Namespace) -> int:
     print(comparison_table(rows))
     skipped = sum(1 for r in rows if r.get("skipped"))
     print(f"\n{len(rows)} runs ({skipped} resumed from existing summaries) in {wall:.1f} s; wrote {path}")
+    print(f"run index: {Path(args.out) / 'index.jsonl'}; near-crash runs: etp near-crash {args.out}")
     return 0

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from ethical_planner.harm import ReducedArea, clock_area, reduced_area, wrap_angle
+from ethical_planner.harm import ReducedArea, clock_area, reduced_area
 from ethical_planner.road_users import KinematicState
 
 from ._records import check, check_positive, to_plain
@@ -60,6 +60,8 @@ class BodyImpact:
         yaw: heading before the impact [rad].
         velocity: velocity before the impact [m/s], (vx, vy).
         velocity_after: velocity after the contact episode [m/s].
+        yaw_rate: yaw rate before the impact [rad/s].
+        yaw_rate_after: yaw rate after the contact episode [rad/s].
         impulse: contact impulse received [N s], (Jx, Jy).
         delta_v_impulse: impulse / mass [m/s], (x, y).
         delta_v_com: change of the centre-of-mass velocity [m/s], (x, y).
@@ -80,6 +82,8 @@ class BodyImpact:
     yaw: float
     velocity: tuple[float, float]
     velocity_after: tuple[float, float]
+    yaw_rate: float
+    yaw_rate_after: float
     impulse: tuple[float, float]
     delta_v_impulse: tuple[float, float]
     delta_v_com: tuple[float, float]
@@ -402,10 +406,9 @@ class ImpactRecorder:
             name, kind = scene.names[entity], scene.types[entity].value
             mass = float(scene.masses[entity])
             dv_impulse = impulse / mass
-        c, s = math.cos(yaw), math.sin(yaw)
-        # Direction the force comes from, in the body frame.
-        jx, jy = -impulse[0], -impulse[1]
-        force_angle = float(wrap_angle(math.atan2(-s * jx + c * jy, c * jx + s * jy) if (jx or jy) else 0.0))
+        # Direction the force comes from (opposite to the impulse), in the body frame.
+        source = _to_body_frame(-impulse, np.array([0.0, 0.0, yaw]))
+        force_angle = float(math.atan2(source[1], source[0])) if np.any(source) else 0.0
         point = point_sum / weight if weight > 0 else np.zeros(2)
         impact_angle = float(math.atan2(point[1], point[0]))
         return BodyImpact(
@@ -417,6 +420,8 @@ class ImpactRecorder:
             yaw=yaw,
             velocity=(float(qvel[0]), float(qvel[1])),
             velocity_after=(float(qvel_after[0]), float(qvel_after[1])),
+            yaw_rate=float(qvel[2]),
+            yaw_rate_after=float(qvel_after[2]),
             impulse=(float(impulse[0]), float(impulse[1])),
             delta_v_impulse=(float(dv_impulse[0]), float(dv_impulse[1])),
             delta_v_com=(float(qvel_after[0] - qvel[0]), float(qvel_after[1] - qvel[1])),

@@ -54,6 +54,7 @@ class RunConfig:
             has come to rest (secondary collisions may still follow) [s].
         post_crash_time: longest time after the first collision before ending [s].
         distance_interval: physics steps between minimum-distance checks.
+        control_interval: physics steps between controller updates (10: 100 Hz).
         control: tracking controller.
     """
 
@@ -66,6 +67,7 @@ class RunConfig:
     settle_time: float = 2.0
     post_crash_time: float = 10.0
     distance_interval: int = 10
+    control_interval: int = 10
     control: ControlConfig = field(default_factory=ControlConfig)
 
     def __post_init__(self) -> None:
@@ -79,10 +81,12 @@ class RunConfig:
             settle_time=self.settle_time,
             post_crash_time=self.post_crash_time,
         )
-        check(
-            isinstance(self.distance_interval, int) and self.distance_interval >= 1,
-            "run.distance_interval must be an integer >= 1",
-        )
+        for name in ("distance_interval", "control_interval"):
+            value = getattr(self, name)
+            check(
+                isinstance(value, int) and not isinstance(value, bool) and value >= 1,
+                f"run.{name} must be an integer >= 1, got {value!r}",
+            )
         check(
             self.replan_rate * self.timestep <= 1.0,
             "run.replan_rate must not exceed one cycle per physics step",
@@ -225,8 +229,7 @@ def _plan_reference(decision: Decision, t0: float) -> TrajectoryReference:
 class _RiskLog:
     """Highest risk values per group along the executed plans."""
 
-    def __init__(self, vulnerable: np.ndarray) -> None:
-        self.vulnerable = vulnerable  # (n_users,) bool
+    def __init__(self) -> None:
         self.top: dict[str, list[float]] = {g: [] for g in GROUPS}
 
     def _push(self, group: str, values: np.ndarray) -> None:
@@ -280,7 +283,9 @@ def run_scenario(
     observer = observer or RunObserver()
     planner_config = preset(planner) if isinstance(planner, str) else planner
     wall_start = time.perf_counter()
-    world = World(scenario, config.control, 1.0 / config.behaviour_rate, config.timestep)
+    world = World(
+        scenario, config.control, 1.0 / config.behaviour_rate, config.timestep, config.control_interval
+    )
     ego = scenario.ego
     planner_obj = Planner(planner_config, world.environment(), Shape(ego.length, ego.width), ego.mass)
     rng = np.random.default_rng(seed)
@@ -288,7 +293,7 @@ def run_scenario(
     steps_per_cycle = max(int(round(1.0 / (config.replan_rate * world.scene.dt))), 1)
     max_steps = int(round(scenario.duration / world.scene.dt))
     vulnerable = np.array([t in VULNERABLE_TYPES for t in world.types])
-    risk_log = _RiskLog(vulnerable[1:])
+    risk_log = _RiskLog()
     collisions: list[ImpactRecord] = []
     levels: dict[str, int] = {}
     timing = {"planning": 0.0, "measurement": 0.0}
@@ -302,6 +307,10 @@ def run_scenario(
     step = 0
     observer.on_start(world, scenario, planner_config.name, seed)
     interval = max(int(observer.step_interval), 1)
+    # The goal test projects onto the route (a k-d tree query): 10 times per second.
+    goal_interval = config.distance_interval * max(
+        1, int(round(0.1 / (config.distance_interval * config.timestep)))
+    )
     clock = time.perf_counter
 
     def record(measurements: list) -> None:
@@ -368,7 +377,7 @@ def run_scenario(
                             else f"collision; stopped {config.post_crash_time} s after it"
                         )
                         break
-                elif world.ego_progress() >= world.goal_s:
+                elif step % goal_interval == 0 and world.ego_progress() >= world.goal_s:
                     outcome, reason = "goal", f"ego reached s = {world.goal_s:.1f} m on its route"
                     break
         else:

@@ -515,6 +515,27 @@ class ContactSpec:
 
 
 @dataclass(frozen=True, slots=True)
+class SensorSpec:
+    """What the ego can perceive.
+
+    Attributes:
+        occlusion: hide road users whose centre and corners are all behind other
+            vehicles (as seen from the ego's centre).
+        range: perception range [m] around the ego's centre, or None for unlimited.
+    """
+
+    occlusion: bool = False
+    range: float | None = None
+
+    def __post_init__(self) -> None:
+        check(
+            isinstance(self.occlusion, bool),
+            f"sensor.occlusion must be true or false, got {self.occlusion!r}",
+        )
+        check_positive("sensor", range=self.range)
+
+
+@dataclass(frozen=True, slots=True)
 class Scenario:
     """A complete scenario.
 
@@ -526,6 +547,7 @@ class Scenario:
         road_users: everyone else.
         duration: time limit [s].
         contact: contact model.
+        sensor: what the ego perceives (occlusion, range).
     """
 
     name: str
@@ -535,6 +557,7 @@ class Scenario:
     road_users: tuple[RoadUserSpec, ...] = ()
     duration: float = 20.0
     contact: ContactSpec = field(default_factory=ContactSpec)
+    sensor: SensorSpec = field(default_factory=SensorSpec)
 
     def __post_init__(self) -> None:
         check(

@@ -17,7 +17,7 @@ import numpy as np
 
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.reference_path import ReferencePath
-from ethical_planner.road_users import KinematicState, RoadUser, Shape
+from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, RoadUser, Shape
 
 from ._records import check_non_negative
 from .behaviour import Fleet, WorldView
@@ -78,7 +78,7 @@ class World:
         control: ControlConfig | None = None,
         behaviour_tick: float = 0.05,
         timestep: float = 0.001,
-        control_interval: int = 4,
+        control_interval: int = 10,
     ) -> None:
         if not (isinstance(control_interval, int) and control_interval >= 1):
             raise ValueError(f"control_interval must be an integer >= 1, got {control_interval!r}")
@@ -124,6 +124,8 @@ class World:
         self._dist_buf = np.zeros(6)
         # Geoms of road users, for distance queries from the ego.
         self._other_geoms = self.scene.geom_ids[1:]
+        self._occluders = np.array([t not in VULNERABLE_TYPES for t in self.types])
+        self._occluders[0] = False
         #: Wall-clock seconds spent in mj_step, in controllers and behaviours, in measurement.
         self.timing = {"mj_step": 0.0, "control": 0.0, "measurement": 0.0}
         self.control_interval = int(control_interval)
@@ -220,8 +222,12 @@ class World:
             rng: generator for the observation noise (needed if ``noise`` is enabled).
             noise: standard deviations; None observes exactly.
 
+        The ego's acceleration is the one its current plan commands; road users are
+        reported with a = 0. Hidden road users (sensor range, occlusion) are left out.
+
         Returns:
-            (ego state, road users with ids 1..n-1, shapes, masses and legal corridors).
+            (ego state, road users with ids = entity indices, shapes, masses and legal
+            corridors).
         """
         qpos, qvel = self.scene.qpos, self.scene.qvel
         v_along = self.speeds_along_heading()
@@ -237,6 +243,7 @@ class World:
             yaw[1:] += rng.normal(0.0, noise.yaw, self.n - 1)
             v[1:] += rng.normal(0.0, noise.velocity, self.n - 1)
         t = self.time
+        visible = self.visible()
         a_plan = float(self.ego_plan.sample(t)[2] @ np.array([math.cos(yaw[0]), math.sin(yaw[0])]))
         ego_state = KinematicState(
             float(x[0]), float(y[0]), float(yaw[0]), float(v[0]), a_plan, float(qvel[0, 2])
@@ -254,8 +261,30 @@ class World:
                 legal=legal[i - 1],
             )
             for i in range(1, self.n)
+            if visible[i]
         ]
         return ego_state, users
+
+    def visible(self) -> np.ndarray:
+        """(n,) bool: which bodies the ego perceives (entity 0, the ego, is always True).
+
+        Applies the scenario's sensor range and, if enabled, occlusion: a road user is
+        hidden when the lines of sight from the ego's centre to its centre and to all
+        four corners pass through another vehicle's footprint (pedestrians and
+        cyclists do not occlude).
+        """
+        sensor = self.scenario.sensor
+        visible = np.ones(self.n, dtype=bool)
+        if self.n == 1 or (sensor.range is None and not sensor.occlusion):
+            return visible
+        pos = self.scene.qpos[:, :2]
+        eye = pos[0]
+        if sensor.range is not None:
+            visible &= np.hypot(*(pos - eye).T) <= sensor.range
+        if sensor.occlusion:
+            visible[1:] &= ~_occluded(eye, self.scene.qpos, self.lengths, self.widths, self._occluders)
+        visible[0] = True
+        return visible
 
     # ------------------------------------------------------------------ stepping
 
@@ -323,7 +352,7 @@ class World:
                 self._any_crashed = True
                 if new[0]:
                     self.ego_crash_time = float(scene.data.time) - scene.dt
-                self.fleet.active[new[1:]] = False
+                self.fleet.deactivate(new[1:])
                 scene.ctrl[np.flatnonzero(new)] = 0.0
         t_end = clock()
         timing = self.timing
@@ -376,3 +405,52 @@ class World:
                 f"{max_penetration} m"
             )
         return None
+
+
+def _occluded(
+    eye: np.ndarray, qpos: np.ndarray, length: np.ndarray, width: np.ndarray, occluders: np.ndarray
+) -> np.ndarray:
+    """(n - 1,) bool: bodies 1..n-1 fully hidden from ``eye`` by occluder footprints.
+
+    Vectorised slab test of every sight line (eye to a target's centre and corners)
+    against every occluder rectangle (in the rectangle's own frame).
+    """
+    n = len(qpos)
+    c, s = np.cos(qpos[:, 2]), np.sin(qpos[:, 2])
+    hl, hw = 0.5 * length, 0.5 * width
+    # Target points: centre and 4 corners of bodies 1..n-1, shape (n-1, 5, 2).
+    sx = np.array([0.0, 1.0, 1.0, -1.0, -1.0])
+    sy = np.array([0.0, 1.0, -1.0, 1.0, -1.0])
+    lx = sx[None, :] * hl[1:, None] * 0.9
+    ly = sy[None, :] * hw[1:, None] * 0.9
+    px = qpos[1:, 0, None] + lx * c[1:, None] - ly * s[1:, None]
+    py = qpos[1:, 1, None] + lx * s[1:, None] + ly * c[1:, None]
+    idx = np.flatnonzero(occluders)
+    if idx.size == 0:
+        return np.zeros(n - 1, dtype=bool)
+    # Segment eye -> point in each occluder's frame: (n-1, 5, k).
+    ox, oy = qpos[idx, 0], qpos[idx, 1]
+    oc, os_ = c[idx], s[idx]
+    ex, ey = eye[0] - ox, eye[1] - oy
+    a_x = ex * oc + ey * os_
+    a_y = -ex * os_ + ey * oc
+    dx = px[..., None] - ox
+    dy = py[..., None] - oy
+    b_x = dx * oc + dy * os_
+    b_y = -dx * os_ + dy * oc
+    t0 = np.zeros(b_x.shape)
+    t1 = np.ones(b_x.shape)
+    for a, b, half in ((a_x, b_x, hl[idx]), (a_y, b_y, hw[idx])):
+        d = b - a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lo = (-half - a) / d
+            hi = (half - a) / d
+        near = np.where(d != 0, np.minimum(lo, hi), np.where(np.abs(a) <= half, -np.inf, np.inf))
+        far = np.where(d != 0, np.maximum(lo, hi), np.where(np.abs(a) <= half, np.inf, -np.inf))
+        t0 = np.maximum(t0, near)
+        t1 = np.minimum(t1, far)
+    blocked = t0 < t1  # the sight line crosses the rectangle
+    # A body never occludes itself.
+    own = idx[None, None, :] == np.arange(1, n)[:, None, None]
+    blocked &= ~own
+    return blocked.any(axis=2).all(axis=1)

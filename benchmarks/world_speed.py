@@ -1,0 +1,105 @@
+"""Speed of the closed-loop world: a 10 s dense urban scenario with 20 road users.
+
+The planner runs at 10 Hz with 225 candidates (15 x 15, T = 2 s), the physics at
+1 kHz. Prints a table with simulated steps per second, the real-time factor and the
+share of wall time spent in physics (mj_step), controllers and behaviours, impact
+measurement and planning. Target: >= 10x real time on one core.
+
+Run: python benchmarks/world_speed.py [--repeat N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+
+import numpy as np
+
+from ethical_planner.config import preset
+from mujoco_world.catalog import get_scenario
+from mujoco_world.control import TrajectoryReference
+from mujoco_world.runner import RunConfig, run_scenario
+from mujoco_world.world import World
+
+
+def closed_loop(duration: float, replan_rate: float) -> dict[str, float]:
+    scenario = dataclasses.replace(get_scenario("dense_urban"), duration=duration)
+    config = preset("ethical")
+    assert config.sampling.n_trajectories == 225
+    summary = run_scenario(scenario, config, seed=0, config=RunConfig(replan_rate=replan_rate))
+    t = summary.timings
+    return {
+        "label": f"closed loop, planner {replan_rate:g} Hz",
+        "users": len(scenario.road_users),
+        "sim": summary.duration,
+        "steps": summary.steps,
+        "cycles": summary.cycles,
+        "wall": t["total"],
+        "physics": t["physics"],
+        "control": t["control"],
+        "measurement": t["measurement"],
+        "planning": t["planning"],
+    }
+
+
+def world_only(duration: float) -> dict[str, float]:
+    """The same scene without the planner: the ego keeps its lane at constant speed."""
+    scenario = get_scenario("dense_urban")
+    start = time.perf_counter()
+    world = World(scenario)
+    x, y = world.positions[0]
+    t = np.arange(0.0, duration + 1.0, 0.5)
+    speed = 8.0
+    world.set_ego_plan(
+        TrajectoryReference(0.0, t, x + speed * t, np.full_like(t, y), np.zeros_like(t),
+                            np.full_like(t, speed), np.zeros_like(t), np.zeros_like(t))
+    )
+    steps = int(round(duration / world.scene.dt))
+    for _ in range(steps):
+        world.step()
+    wall = time.perf_counter() - start
+    return {
+        "label": "world only (no planner)",
+        "users": len(scenario.road_users),
+        "sim": world.time,
+        "steps": steps,
+        "cycles": 0,
+        "wall": wall,
+        "physics": world.timing["mj_step"],
+        "control": world.timing["control"],
+        "measurement": world.timing["measurement"],
+        "planning": 0.0,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=10.0, help="simulated time [s]")
+    parser.add_argument("--repeat", type=int, default=1, help="repetitions (best is shown)")
+    args = parser.parse_args()
+    rows = []
+    for make in (lambda: closed_loop(args.duration, 10.0), lambda: world_only(args.duration)):
+        rows.append(min((make() for _ in range(args.repeat)), key=lambda r: r["wall"]))
+    head = (
+        f"{'run':<30} {'users':>5} {'sim s':>6} {'wall s':>7} {'x real':>7} {'steps/s':>8} "
+        f"{'physics':>8} {'control':>8} {'measure':>8} {'planning':>9} {'other':>6} {'ms/cycle':>9}"
+    )
+    print(head)
+    print("-" * len(head))
+    for r in rows:
+        wall = r["wall"]
+        other = wall - r["physics"] - r["control"] - r["measurement"] - r["planning"]
+        per_cycle = 1e3 * r["planning"] / r["cycles"] if r["cycles"] else float("nan")
+        print(
+            f"{r['label']:<30} {r['users']:>5} {r['sim']:>6.1f} {wall:>7.2f} {r['sim'] / wall:>7.1f} "
+            f"{r['steps'] / wall:>8.0f} {r['physics'] / wall:>8.1%} {r['control'] / wall:>8.1%} "
+            f"{r['measurement'] / wall:>8.1%} {r['planning'] / wall:>9.1%} {other / wall:>6.1%} "
+            f"{per_cycle:>9.2f}"
+        )
+    print("\nphysics = mj_step; control = controllers and road-user behaviours; measure = contact")
+    print("filtering, impact recording and the minimum-distance queries; target >= 10x real time.")
+
+
+if __name__ == "__main__":
+    main()
