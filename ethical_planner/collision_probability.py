@@ -36,14 +36,19 @@ from __future__ import annotations
 import math
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import ndtr, owens_t
 
 __all__ = ["CollisionProbability", "collision_probability", "polygon_gaussian_mass"]
+
+T = TypeVar("T")
+J = TypeVar("J")
 
 #: An origin closer than this (whitened units) to an edge's line is "on" that line:
 #: the edge's triangle (origin, a, b) then has mass below 0.4 * 1e-12 and counts 0.
@@ -58,11 +63,14 @@ _D2_SKIP = 75.0
 _MIN_EDGE = 1e-12
 _HALF_PI = 0.5 * math.pi
 
-#: Fast path: Owen's T terms with |h| >= _FAR (whitened units) are dropped and edge
-#: coordinates |t| are clamped to it. Both change a term by at most Q(_FAR) / 2 < 5e-10,
-#: Q the standard normal upper tail: T(h, a) <= Q(h) / 2, and the mass beyond the
-#: clamp, P(X > h, Y > t X / h), is at most Q(h) Q(t).
-_FAR = 6.0
+#: Fast path: an edge whose closest point is r_min (whitened units) from the mean adds at
+#: most exp(-r_min^2 / 2) / 2 to p (the part of its wedge beyond the edge, times the wedge
+#: angle / 2 pi <= 1/2). Edges with r_min >= gate_sigmas, kept in [_FAR_MIN, _FAR_MAX],
+#: are dropped (each below 7.6e-9 at the default 6 sigma, below 3e-17 as on the exact path
+#: without a gate), and edge coordinates |t| are clamped to that radius (the mass beyond
+#: the clamp, P(X > h, Y > t X / h) <= Q(h) Q(t), is smaller still).
+_FAR_MIN = 6.0
+_FAR_MAX = math.sqrt(_D2_SKIP)
 
 #: Gauss-Legendre rule for T(h, a) = a / (2 pi) int_0^1 exp(-h^2 (1 + a^2 s^2) / 2) /
 #: (1 + a^2 s^2) ds with 0 <= a <= 1: the integrand is even in s, so the positive half
@@ -72,21 +80,23 @@ _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(10)
 _GL_S2 = tuple(float(s * s) for s in _GL_NODES[5:])
 _GL_W = tuple(float(w / (2.0 * math.pi)) for w in _GL_WEIGHTS[5:])
 
-#: Upper normal tail Q(x) = P(Z > x) on [0, _FAR]: nodes every 1/512, evaluated by a
-#: second-order Taylor step from the nearest node, Q(x_i + d) ~ Q_i - phi_i d (1 - x d / 2),
-#: with an error below max|Q'''| (1/1024)^3 / 6 < 1e-10.
-_Q_STEP = 1.0 / 512.0
-_Q_NODES = np.arange(int(_FAR / _Q_STEP) + 2) * _Q_STEP
-_Q_TABLE = ndtr(-_Q_NODES)
-_PHI_TABLE = np.exp(-0.5 * _Q_NODES * _Q_NODES) / math.sqrt(2.0 * math.pi)
+#: Upper normal tail Q(x) = P(Z > x) on [0, _FAR_MAX]: linear interpolation between nodes
+#: every 1/4096, error below max|Q''| step^2 / 8 = 0.242 / 4096^2 / 8 < 2e-9.
+_Q_STEP = 1.0 / 4096.0
+_Q_TABLE = ndtr(-np.arange(int(_FAR_MAX / _Q_STEP) + 2) * _Q_STEP)
+_Q_SLOPE = np.append(np.diff(_Q_TABLE), 0.0)
+
+#: Owen's T on the hot path is evaluated in float32: relative rounding 6e-8 on T <= 1/8
+#: adds at most 2.5e-8 to the Gauss-Legendre error (measured against SciPy).
+_OWENS_DTYPE = np.float32
 
 #: Survivor triples per kernel call: large enough to amortise numpy's per-call cost,
 #: small enough that the scratch buffers stay in cache.
-_CHUNK = 8192
+_CHUNK = 4096
 #: Triples gated per block (a block of trajectories against all road users and steps).
 _GATE_BLOCK = 32768
 #: Below this many triples the work runs on the calling thread only.
-_PARALLEL_MIN = 4 * _GATE_BLOCK
+_PARALLEL_MIN = 16384
 
 
 @dataclass(frozen=True, slots=True)
@@ -222,10 +232,14 @@ def collision_probability(
     ).reshape(_E_ROWS, n_traj * n_t)
     degenerate = min(ego_length, ego_width, float(olen.min()), float(owid.min())) <= 0.0
 
-    problem = _Problem(n_traj, n_obs, n_t, obs_rows, ego_rows, degenerate)
-    block = max(1, _GATE_BLOCK // (n_obs * n_t))
-    starts = range(0, n_traj, block)
-    jobs = [(start, min(start + block, n_traj)) for start in starts]
+    # Edges dropped beyond gate_sigmas whitened units, the gate's own scale (_FAR_MIN).
+    far = min(max(gate_sigmas, _FAR_MIN), _FAR_MAX)
+    problem = _Problem(n_traj, n_obs, n_t, obs_rows, ego_rows, degenerate, far)
+    # Blocks of trajectories: small enough for the cache, and at least a few per thread
+    # so that two threads finish together.
+    threads = _threads() if probability.size >= _PARALLEL_MIN else 1
+    block = max(1, min(_GATE_BLOCK // (n_obs * n_t), -(-n_traj // (4 * threads))))
+    jobs = [(start, min(start + block, n_traj)) for start in range(0, n_traj, block)]
 
     def run(job: tuple[int, int]) -> None:
         start, stop = job
@@ -233,8 +247,8 @@ def collision_probability(
 
     # Each block writes its own rows of the outputs, so the result does not depend on
     # which thread runs which block.
-    if len(jobs) > 1 and probability.size >= _PARALLEL_MIN and _threads() > 1:
-        list(_executor().map(run, jobs))
+    if threads > 1:
+        _parallel_for(jobs, run)
     else:
         for job in jobs:
             run(job)
@@ -400,6 +414,7 @@ class _Problem:
         obs_rows: per-(obs, t) rows (see collision_probability), shape (15, n_obs * n_t).
         ego_rows: per-(traj, t) rows x, y, L cos, -W sin, L sin, W cos, shape (6, n_traj * n_t).
         degenerate: a footprint has a zero length or width (zero-length edges).
+        far: edges farther than this from the mean are dropped [whitened units] (_FAR_MIN).
     """
 
     n_traj: int
@@ -408,6 +423,7 @@ class _Problem:
     obs_rows: np.ndarray
     ego_rows: np.ndarray
     degenerate: bool
+    far: float
 
 
 class _Scratch(threading.local):
@@ -415,20 +431,30 @@ class _Scratch(threading.local):
 
     Temporaries of a few hundred kB are slow to allocate: glibc returns them to the
     kernel on free and every new one page-faults (about 10x the cost of the arithmetic
-    on this kind of VM). The kernels below write into these buffers instead.
+    on the VMs measured). The kernels below write into these buffers instead.
     """
 
     def __init__(self) -> None:
-        self.buffers: dict[str, np.ndarray] = {}
+        self.buffers: dict[tuple[str, type], np.ndarray] = {}
+        self.views: dict[tuple[str, tuple[int, ...], type], np.ndarray] = {}
 
     def get(self, name: str, shape: tuple[int, ...], dtype: type = np.float64) -> np.ndarray:
         """Return a C-contiguous scratch array of ``shape``; its contents are undefined."""
-        size = math.prod(shape)
-        buffer = self.buffers.get(name)
-        if buffer is None or buffer.size < size or buffer.dtype != dtype:
-            buffer = np.empty(max(size, 1), dtype=dtype)
-            self.buffers[name] = buffer
-        return buffer[:size].reshape(shape)
+        key = (name, shape, dtype)
+        view = self.views.get(key)
+        if view is None:
+            size = math.prod(shape)
+            buffer = self.buffers.get((name, dtype))
+            if buffer is None or buffer.size < size:
+                # Grow with headroom; views of the old buffer are dropped with it.
+                buffer = np.empty(max(size + size // 4, 1), dtype=dtype)
+                self.buffers[(name, dtype)] = buffer
+                self.views = {k: v for k, v in self.views.items() if k[0] != name or k[2] != dtype}
+            if len(self.views) > 4096:
+                self.views.clear()
+            view = buffer[:size].reshape(shape)
+            self.views[key] = view
+        return view
 
 
 _SCRATCH = _Scratch()
@@ -437,7 +463,7 @@ _POOL_LOCK = threading.Lock()
 
 
 def _threads() -> int:
-    """Worker threads for large inputs: ETHICAL_PLANNER_THREADS, else min(2, CPU count)."""
+    """Threads for large inputs: ETHICAL_PLANNER_THREADS, else min(2, CPU count)."""
     value = os.environ.get("ETHICAL_PLANNER_THREADS")
     if value:
         try:
@@ -449,16 +475,58 @@ def _threads() -> int:
     return min(2, os.cpu_count() or 1)
 
 
-def _executor() -> ThreadPoolExecutor:
-    """The module's thread pool, created on first use (numpy releases the GIL in its loops)."""
+def _executor() -> ThreadPoolExecutor | None:
+    """The shared helper pool (threads - 1 workers), created on first use; None for 1 thread."""
     global _POOL
-    workers = _threads()
+    workers = _threads() - 1
+    if workers < 1:
+        return None
     with _POOL_LOCK:
         if _POOL is None or _POOL[0] != workers:
             if _POOL is not None:
                 _POOL[1].shutdown(wait=False)
-            _POOL = (workers, ThreadPoolExecutor(workers, thread_name_prefix="collision-p"))
+            _POOL = (workers, ThreadPoolExecutor(workers, thread_name_prefix="ethical-planner"))
         return _POOL[1]
+
+
+def _submit(function: Callable[[], T]) -> Future[T] | None:
+    """Run ``function`` on a helper thread; None (run it yourself) without helpers."""
+    pool = _executor()
+    return None if pool is None else pool.submit(function)
+
+
+def _parallel_for(jobs: Sequence[J], run: Callable[[J], None]) -> None:
+    """Run ``run(job)`` for every job on the calling thread and the helper threads.
+
+    Jobs are handed out one at a time from a shared iterator, so a helper that is busy
+    with something else (see ``_submit``) simply takes fewer. ``run`` must write its
+    results to places no other job touches; the result then does not depend on the
+    assignment of jobs to threads. numpy releases the GIL inside its loops, which is
+    where the time goes.
+    """
+    pool = _executor()
+    if pool is None or len(jobs) < 2:
+        for job in jobs:
+            run(job)
+        return
+    lock = threading.Lock()
+    remaining = iter(jobs)
+
+    def worker() -> None:
+        while True:
+            with lock:
+                job = next(remaining, None)
+            if job is None:
+                return
+            run(job)
+
+    helpers = [pool.submit(worker) for _ in range(_threads() - 1)]
+    worker()
+    for helper in helpers:
+        # A helper that has not started (its thread still busy elsewhere) has nothing
+        # left to do; one that has started finishes the job it holds.
+        if not helper.cancel():
+            helper.result()
 
 
 def _gate_and_integrate(
@@ -528,30 +596,36 @@ def _octagon_mass(problem: _Problem, o: np.ndarray, e: np.ndarray) -> tuple[np.n
     """
     h, t1, t2, inside = _octagon_edges(problem, o, e)
     m = o.size
-    ah = _SCRATCH.get("abs_h", (8, m))
+    get = _SCRATCH.get
+    ah = get("abs_h", (8, m))
     np.abs(h, out=ah)
     winding = _winding_fast(h, ah, t1, t2)
-    # Only edges with |h| < _FAR whose span reaches into |t| < _FAR carry mass above
-    # 5e-10; typically about half of them. Compress those, integrate, add back per triple.
-    active = _SCRATCH.get("active", (8, m), np.bool_)
-    test = _SCRATCH.get("active_test", (8, m), np.bool_)
-    np.less(ah, _FAR, out=active)
-    np.greater_equal(ah, _H_TOL, out=test)  # on-line edges count 0 (see _winding)
-    active &= test
-    np.less(t1, _FAR, out=test)
-    active &= test
-    np.greater(t2, -_FAR, out=test)
+    # An edge's term is the mass of the part of its wedge beyond the edge, all at least
+    # r_min (the edge's distance from the origin) away: below exp(-r_min^2 / 2) / 2.
+    # Keep edges with r_min < far (and off the origin's line, see _winding); typically
+    # about half of them. Compress those, integrate, add back per triple.
+    near = get("near_t", (8, m))
+    np.minimum(t2, 0.0, out=near)
+    np.maximum(near, t1, out=near)  # the edge point nearest to the foot of h, along u
+    near *= near
+    r2 = get("r2", (8, m))
+    np.multiply(h, h, out=r2)
+    r2 += near
+    active = get("active", (8, m), np.bool_)
+    test = get("active_test", (8, m), np.bool_)
+    np.less(r2, problem.far * problem.far, out=active)
+    np.greater_equal(ah, _H_TOL, out=test)
     active &= test
     where = np.flatnonzero(active)
     n = where.size
-    mass = _SCRATCH.get("mass", (m,))
+    mass = get("mass", (m,))
     if n:
-        hs = _SCRATCH.get("h_active", (n,))
-        ts = _SCRATCH.get("t_active", (2, n))
+        hs = get("h_active", (n,))
+        ts = get("t_active", (2, n))
         h.take(where, out=hs)
         t1.take(where, out=ts[0])
         t2.take(where, out=ts[1])
-        terms = _edge_terms(hs, ts)
+        terms = _edge_terms(hs, ts, problem.far)
         np.remainder(where, m, out=where)  # flat (edge, triple) -> triple
         np.subtract(winding, np.bincount(where, weights=terms, minlength=m), out=mass)
     else:
@@ -608,11 +682,10 @@ def _octagon_edges(
 
     # Whitened ego centre relative to the mean: z = W (ego - mean).
     z = get("z", (2, m))
-    np.subtract(q[0], p[0], out=z[0])
-    np.subtract(q[1], p[1], out=z[1])
-    np.multiply(w22, z[1], out=z[1])
+    np.subtract(q[:2], p[:2], out=z)
     tmp = get("tmp", (4, m))
     np.multiply(w21, z[0], out=tmp[0])
+    z[1] *= w22
     z[1] += tmp[0]
     z[0] *= w11
     # Whitened ego segments: W (L cos, L sin) and W (-Wd sin, Wd cos).
@@ -624,12 +697,12 @@ def _octagon_edges(
     np.multiply(seg_y[2:], seg_y[2:], out=tmp[:2])
     seg_len[2:] += tmp[:2]
     np.sqrt(seg_len[2:], out=seg_len[2:])
-    inv = get("inv_len", (4, m))
+    half_inv = get("half_inv", (4, m))
     if problem.degenerate:
-        inv.fill(0.0)
-        np.divide(1.0, seg_len, out=inv, where=seg_len > _MIN_EDGE)
+        half_inv.fill(0.0)
+        np.divide(0.5, seg_len, out=half_inv, where=seg_len > _MIN_EDGE)
     else:
-        np.divide(1.0, seg_len, out=inv)
+        np.divide(0.5, seg_len, out=half_inv)
 
     # Road-user x ego cross and dot products, (2, 2, m): [obs segment, ego segment].
     cross = get("cross", (2, 2, m))
@@ -646,17 +719,19 @@ def _octagon_edges(
     np.multiply(seg_y[2], seg_y[3], out=tmp[0])
     ego_dot += tmp[0]
 
-    # rho: the two same-body cross products are det W * length * width >= 0.
+    # 2 |g_k| rho_k: the two same-body cross products are det W * length * width >= 0.
     rho = get("rho", (4, m))
     np.abs(cross, out=tmp22)
     np.add(tmp22[:, 0], tmp22[:, 1], out=rho[:2])
     np.add(tmp22[0], tmp22[1], out=rho[2:])
     rho[:2] += k[0]
     rho[2:] += k[2]
-    # tau: s_ki (g_k . g_i) for the mixed pairs is -copysign(1, cross) * dot; for the
-    # same-body pairs (cross >= 0, so s = -1 before the later segment) it is -dot.
+    # 2 |g_k| tau_k + |g_k|^2 = sum_i s_ki (g_k . g_i). For a mixed pair (k road user,
+    # i ego) s_ki (g_k . g_i) = -copysign(1, cross) * dot; for a same-body pair
+    # (cross >= 0, the second segment taking s = +1) it is -dot for the first, +dot
+    # for the second segment.
     np.copysign(1.0, cross, out=tmp22)
-    tmp22 *= dot  # = -s_ki (g_k . g_i), k road user, i ego
+    tmp22 *= dot
     tau = get("tau", (4, m))
     np.add(tmp22[:, 0], tmp22[:, 1], out=tau[:2])
     np.negative(tau[:2], out=tau[:2])
@@ -665,24 +740,19 @@ def _octagon_edges(
     np.add(tmp22[0], tmp22[1], out=tau[2:])
     tau[2] -= ego_dot
     tau[3] += ego_dot
-    half_inv = get("half_inv", (4, m))
-    np.multiply(inv, 0.5, out=half_inv)
-    rho *= half_inv
-    tau *= half_inv
-    np.multiply(seg_len, 0.5, out=tmp)
-    tau -= tmp
 
-    # z . n_k and z . u_k.
+    # 2 |g_k| (z . n_k) = 2 (z x g_k) and 2 |g_k| (z . u_k) = 2 (z . g_k): everything
+    # is scaled by 2 |g_k| until the one multiplication by 1 / (2 |g_k|) below.
     across_z = get("across_z", (4, m))
     along_z = get("along_z", (4, m))
     np.multiply(seg_y, z[0], out=across_z)
     np.multiply(seg_x, z[1], out=tmp)
     across_z -= tmp
-    across_z *= inv
+    across_z *= 2.0
     np.multiply(seg_x, z[0], out=along_z)
     np.multiply(seg_y, z[1], out=tmp)
     along_z += tmp
-    along_z *= inv
+    along_z *= 2.0
 
     h = get("h", (8, m))
     t1 = get("t1", (8, m))
@@ -691,8 +761,13 @@ def _octagon_edges(
     np.subtract(rho, across_z, out=h[4:])
     np.add(tau, along_z, out=t1[:4])
     np.subtract(tau, along_z, out=t1[4:])
-    np.add(t1[:4], seg_len, out=t2[:4])
-    np.add(t1[4:], seg_len, out=t2[4:])
+    # Edges k and k + 4 share |g_k|: view (8, m) as (2, 4, m) to scale both at once.
+    h.reshape(2, 4, m).__imul__(half_inv)
+    t1_pairs = t1.reshape(2, 4, m)
+    t1_pairs *= half_inv
+    np.multiply(seg_len, 0.5, out=tmp)
+    t1_pairs -= tmp
+    np.add(t1_pairs, seg_len, out=t2.reshape(2, 4, m))
 
     # Closed octagon: touching counts. Degenerate edges have h = 0 and never exclude.
     outside = get("outside", (8, m), np.bool_)
@@ -722,17 +797,18 @@ def _winding_fast(h: np.ndarray, abs_h: np.ndarray, t1: np.ndarray, t2: np.ndarr
     return winding
 
 
-def _edge_terms(h: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """sign(h) [E(|h|, t2) - E(|h|, t1)] of edges with _H_TOL <= |h| < _FAR.
+def _edge_terms(h: np.ndarray, t: np.ndarray, far: float) -> np.ndarray:
+    """sign(h) [E(|h|, t2) - E(|h|, t1)] of edges with _H_TOL <= |h| < far.
 
     E(h, t) = T(h, t / h) is the standard normal mass of {X > h, 0 < Y < t X / h}
     (negative for t < 0). For |t| <= h, T(h, |t| / h) has a <= 1; otherwise Owen's
     reflection T(h, a) = Q(h) / 2 + Q(ah) / 2 - Q(h) Q(ah) - T(ah, 1 / a) (a > 1, h >= 0)
-    does, with ah = |t|. |t| is clamped to _FAR (see there).
+    does, with ah = |t|. |t| is clamped to ``far`` (see _FAR_MIN).
 
     Args:
         h: Signed edge distances, shape (n,).
-        t: Edge start and end coordinates t1, t2, shape (2, n); overwritten.
+        t: Edge start and end coordinates t1, t2, shape (2, n).
+        far: clamp for |t| [whitened units], <= _FAR_MAX.
 
     Returns:
         The terms, shape (n,), a scratch view.
@@ -744,15 +820,16 @@ def _edge_terms(h: np.ndarray, t: np.ndarray) -> np.ndarray:
     x = get("tail_x", (3, n))
     np.abs(h, out=x[0])
     np.abs(t, out=x[1:])
-    np.minimum(x[1:], _FAR, out=x[1:])
+    np.minimum(x[1:], far, out=x[1:])
     tail = _upper_tail(x)
     ah, at = x[0], x[1:]
-    big = get("owens_h", (2, n))
-    small = get("owens_a", (2, n))
-    np.maximum(at, ah, out=big)
-    np.minimum(at, ah, out=small)
+    big = get("owens_h", (2, n), _OWENS_DTYPE)
+    small = get("owens_a", (2, n), _OWENS_DTYPE)
+    np.maximum(at, ah, out=big, casting="same_kind")
+    np.minimum(at, ah, out=small, casting="same_kind")
     small /= big
-    owens = _owens_t_unit(big, small)
+    owens = get("owens", (2, n))
+    owens[...] = _owens_t_unit(big, small)
     # Reflected value Q(h) / 2 + Q(t) (1/2 - Q(h)) - T(t, h / t) where |t| > |h|.
     reflected = get("reflected", (2, n))
     half_minus = get("half_minus", (n,))
@@ -772,23 +849,23 @@ def _edge_terms(h: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def _owens_t_unit(h: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """Owen's T(h, a) for h >= 0 and 0 <= a <= 1, within 4.5e-9 (see _GL_S2).
+    """Owen's T(h, a) for h >= 0 and 0 <= a <= 1 (see _GL_S2), in the dtype of ``h``.
 
     Args:
         h: shape (2, n).
-        a: shape (2, n); overwritten.
+        a: shape (2, n).
 
     Returns:
         T, shape (2, n), a scratch view.
 
     """
-    shape = h.shape
+    shape, dtype = h.shape, h.dtype.type
     get = _SCRATCH.get
-    a2 = get("owens_a2", shape)
-    half_h2 = get("owens_q", shape)
-    y = get("owens_y", shape)
-    term = get("owens_term", shape)
-    total = get("owens_total", shape)
+    a2 = get("owens_a2", shape, dtype)
+    half_h2 = get("owens_q", shape, dtype)
+    y = get("owens_y", shape, dtype)
+    term = get("owens_term", shape, dtype)
+    total = get("owens_total", shape, dtype)
     np.multiply(a, a, out=a2)
     np.multiply(h, h, out=half_h2)
     half_h2 *= -0.5
@@ -807,26 +884,18 @@ def _owens_t_unit(h: np.ndarray, a: np.ndarray) -> np.ndarray:
 
 
 def _upper_tail(x: np.ndarray) -> np.ndarray:
-    """Q(x) = P(Z > x) for 0 <= x <= _FAR, within 1e-10 (see _Q_STEP); a scratch view."""
+    """Q(x) = P(Z > x) for 0 <= x <= _FAR_MAX by linear interpolation (see _Q_STEP); a scratch view."""
     get = _SCRATCH.get
     node = get("tail_node", x.shape)
     index = get("tail_index", x.shape, np.intp)
-    d = get("tail_d", x.shape)
     out = get("tail_out", x.shape)
     np.multiply(x, 1.0 / _Q_STEP, out=node)
-    np.rint(node, out=node)
-    index[...] = node
-    node *= _Q_STEP
-    np.subtract(x, node, out=d)
-    # Q_i - phi_i d (1 - x d / 2)
-    np.multiply(x, d, out=node)
-    node *= -0.5
-    node += 1.0
-    node *= d
-    np.take(_PHI_TABLE, index, out=out)
+    index[...] = node  # truncation = floor for x >= 0
+    node -= index
+    np.take(_Q_SLOPE, index, out=out)
     node *= out
     np.take(_Q_TABLE, index, out=out)
-    out -= node
+    out += node
     return out
 
 

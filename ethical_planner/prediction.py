@@ -157,10 +157,12 @@ def predict_constant_turn_rate(
     x = np.where(turning, x0 + v0 / safe_omega * (np.sin(heading) - np.sin(yaw0)), x0 + v0 * t * np.cos(yaw0))
     y = np.where(turning, y0 - v0 / safe_omega * (np.cos(heading) - np.cos(yaw0)), y0 + v0 * t * np.sin(yaw0))
     is_ped = np.array([u.type is RoadUserType.PEDESTRIAN for u in road_users])[:, None]
-    sigma_long = config.sigma0_long + np.where(
+    # A parked vehicle does not move: its uncertainty stays that of the observation.
+    moving = np.array([u.type is not RoadUserType.PARKED_VEHICLE for u in road_users])[:, None]
+    sigma_long = config.sigma0_long + moving * np.where(
         is_ped, config.pedestrian_growth, config.growth_long + config.growth_long_per_speed * np.abs(v0)
     ) * t
-    sigma_lat = config.sigma0_lat + np.where(is_ped, config.pedestrian_growth, config.growth_lat) * t
+    sigma_lat = config.sigma0_lat + moving * np.where(is_ped, config.pedestrian_growth, config.growth_lat) * t
     cov = _rotated_covariance(sigma_long, sigma_lat, heading)
     prediction = Prediction(
         ids=ids,

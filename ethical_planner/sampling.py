@@ -134,6 +134,9 @@ def _polynomial_derivatives(coeffs: np.ndarray, t: np.ndarray, horizon: np.ndarr
     """Value and first three time derivatives of polynomials, held past their horizon.
 
     After t = T the motion continues with the end velocity and zero acceleration.
+    Candidates share one to three horizons, so each horizon's power basis
+    tt^p, tt = min(t, T), is built once and the derivatives are matrix products
+    (coefficients of the derivative) @ (basis), instead of a power per element.
 
     Args:
         coeffs: (n_traj, k) lowest power first. t: (n_t,). horizon: (n_traj,).
@@ -141,19 +144,30 @@ def _polynomial_derivatives(coeffs: np.ndarray, t: np.ndarray, horizon: np.ndarr
     Returns:
         Shape (4, n_traj, n_t): value, first, second, third derivative.
     """
-    horizon = horizon[:, None]
-    tt = np.minimum(t[None, :], horizon)
-    out = np.zeros((4,) + tt.shape)
-    degree = coeffs.shape[1] - 1
+    n, k = coeffs.shape
+    out = np.zeros((4, n, t.size))
+    # d^order/dt^order of sum_p c_p t^p = sum_p c_p p!/(p - order)! t^(p - order).
+    powers = np.arange(k)
+    derivative_coeffs = []
     for order in range(4):  # four derivative orders, not a loop over data
-        for power in range(order, degree + 1):
-            factor = np.prod(np.arange(power - order + 1, power + 1)) if order else 1.0
-            out[order] += factor * coeffs[:, power : power + 1] * tt ** (power - order)
-    overtime = np.maximum(t[None, :] - horizon, 0.0)
-    out[0] += out[1] * overtime
-    past = overtime > 0
-    out[2] = np.where(past, 0.0, out[2])
-    out[3] = np.where(past, 0.0, out[3])
+        falling = np.ones(k - order) if order == 0 else np.prod(
+            powers[order:, None] - np.arange(order)[None, :], axis=1
+        ).astype(float)
+        derivative_coeffs.append(coeffs[:, order:] * falling)
+    for value in np.unique(horizon):  # one to three horizons
+        rows = np.flatnonzero(horizon == value)
+        if rows[-1] - rows[0] + 1 == rows.size:  # contiguous, as sample_candidates builds them
+            rows = slice(rows[0], rows[-1] + 1)
+        tt = np.minimum(t, value)
+        basis = tt[None, :] ** powers[:, None]  # (k, n_t)
+        for order, dc in enumerate(derivative_coeffs):
+            if dc.shape[1]:
+                out[order, rows] = dc[rows] @ basis[: dc.shape[1]]
+        past = t > value
+        if past.any():
+            overtime = np.maximum(t - value, 0.0)
+            out[0, rows] += out[1, rows] * overtime
+            out[2:, rows, past] = 0.0
     return out
 
 
@@ -250,25 +264,59 @@ def frenet_to_candidates(
     dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
     x_r, y_r, theta_r, kappa_r, dkappa_r = path.evaluate(s)
 
-    # Velocity and acceleration in the path's (tangent, normal) frame, exact.
-    one_minus_kd = 1.0 - kappa_r * d
+    # Velocity and acceleration in the path's (tangent, normal) frame, exact. Written
+    # with in-place operations: every temporary of this size costs page faults.
+    one_minus_kd = kappa_r * d
+    np.subtract(1.0, one_minus_kd, out=one_minus_kd)
     along = s_dot * one_minus_kd
     across = d_dot
-    along_dot = s_ddot * one_minus_kd - s_dot * (dkappa_r * s_dot * d + kappa_r * d_dot)
-    acc_t = along_dot - across * s_dot * kappa_r
-    acc_n = along * s_dot * kappa_r + d_ddot
-    speed = np.hypot(along, across)
+    s_dot_kappa = s_dot * kappa_r
+    # along_dot = s'' (1 - kappa d) - s' (kappa' s' d + kappa d')
+    along_dot = dkappa_r * s_dot
+    along_dot *= d
+    tmp = kappa_r * d_dot
+    along_dot += tmp
+    along_dot *= s_dot
+    np.multiply(s_ddot, one_minus_kd, out=tmp)
+    np.subtract(tmp, along_dot, out=along_dot)
+    acc_t = across * s_dot_kappa
+    np.subtract(along_dot, acc_t, out=acc_t)
+    acc_n = along * s_dot_kappa
+    acc_n += d_ddot
+    speed = along * along
+    np.multiply(across, across, out=tmp)
+    speed += tmp
+    np.sqrt(speed, out=speed)
     safe = np.maximum(speed, 1e-9)
     moving = speed > 1e-3
-    kappa = np.where(moving, (along * acc_n - across * acc_t) / safe**3, 0.0)
-    accel = np.where(moving, (along * acc_t + across * acc_n) / safe, s_ddot)
+    # kappa = (along acc_n - across acc_t) / |v|^3, a = (along acc_t + across acc_n) / |v|
+    kappa = along * acc_n
+    np.multiply(across, acc_t, out=tmp)
+    kappa -= tmp
+    accel = along * acc_t
+    np.multiply(across, acc_n, out=tmp)
+    accel += tmp
+    accel /= safe
+    safe *= safe
+    safe *= speed.clip(1e-9)
+    kappa /= safe
+    kappa[~moving] = 0.0
+    np.copyto(accel, s_ddot, where=~moving)
+    x = np.sin(theta_r)
+    x *= d
+    np.subtract(x_r, x, out=x)
+    y = np.cos(theta_r)
+    y *= d
+    y += y_r
+    yaw = np.arctan2(across, along)
+    yaw += theta_r
 
     weights = np.full(len(t), dt)  # rectangle rule over the samples
     return Candidates(
         t=t,
-        x=x_r - d * np.sin(theta_r),
-        y=y_r + d * np.cos(theta_r),
-        yaw=theta_r + np.arctan2(across, along),
+        x=x,
+        y=y,
+        yaw=yaw,
         v=speed,
         a=accel,
         kappa=kappa,

@@ -57,3 +57,9 @@ def test_empty_prediction_and_duplicate_ids():
     with pytest.raises(ValueError, match="unique"):
         predict_constant_turn_rate([_car(KinematicState(0, 0, 0, 1)), _car(KinematicState(5, 0, 0, 1))],
                                    np.zeros(2), PredictionConfig())
+
+
+def test_parked_vehicles_keep_their_initial_uncertainty():
+    parked = RoadUser(4, RoadUserType.PARKED_VEHICLE, KinematicState(0, 0, 0, 0), DEFAULT_SHAPES[RoadUserType.CAR])
+    pred = predict_constant_turn_rate([parked], np.linspace(0, 3, 31), PredictionConfig(covariance_floor=1e-6))
+    np.testing.assert_allclose(pred.cov[0, -1], pred.cov[0, 0])
