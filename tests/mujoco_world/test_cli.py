@@ -62,6 +62,7 @@ def test_demo_runs_on_two_workers_and_resumes(tmp_path, capsys):
     # A run in a spawned worker equals the same run in this process.
     written = json.loads((out / "oncoming_drift__standard__s0" / "summary.json").read_text())
     written.pop("timings")
+    assert written.pop("recording").endswith("oncoming_drift__standard__s0/recording.rrd")
     here = run_scenario(get_scenario("oncoming_drift"), "standard", seed=0).comparable_dict()
     assert json.loads(json.dumps(here)) == written
 
