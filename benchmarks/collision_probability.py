@@ -5,12 +5,17 @@ at 12 m/s, candidates fanning out over end lateral offsets and end speeds, 20 ro
 users (pedestrians to trucks) 5-60 m ahead on the three lanes, driving 0-15 m/s,
 their covariance growing over the 3 s horizon.
 
+Columns: survivors of the distance gate, Owen's T evaluations of the fast kernel
+(two per edge that can matter), median wall time on one and on two threads
+(ETHICAL_PLANNER_THREADS), time per survivor on one thread.
+
 Run: python benchmarks/collision_probability.py
 """
 
 from __future__ import annotations
 
 import math
+import os
 import statistics
 import time
 
@@ -61,20 +66,20 @@ def road_users(n_obs: int, n_t: int, rng: np.random.Generator):
 
 
 def count_owens_t(args, gate_sigmas):
-    """Return (survivors, owens_t evaluations) of one call, by wrapping owens_t."""
+    """Return (result, survivors, Owen's T evaluations) of one call, by wrapping the kernel."""
     calls = 0
-    real = cp.owens_t
+    real = cp._owens_t_unit
 
     def counting(h, a):
         nonlocal calls
         calls += np.size(h)
         return real(h, a)
 
-    cp.owens_t = counting
+    cp._owens_t_unit = counting
     try:
         result = cp.collision_probability(*args, gate_sigmas=gate_sigmas)
     finally:
-        cp.owens_t = real
+        cp._owens_t_unit = real
     ex, ey = args[0], args[1]
     mean, cov, length, width = args[5], args[6], args[8], args[9]
     sigma = np.sqrt(np.linalg.eigvalsh(cov)[..., -1])
@@ -83,6 +88,25 @@ def count_owens_t(args, gate_sigmas):
     dist = np.hypot(ex[:, None] - mean[None, ..., 0], ey[:, None] - mean[None, ..., 1])
     survivors = int(np.count_nonzero(dist <= reach))
     return result, survivors, calls
+
+
+def median_ms(args, gate, reps, threads):
+    """Median wall time [ms] of ``reps`` calls with ``threads`` threads, after a warm-up."""
+    previous = os.environ.get("ETHICAL_PLANNER_THREADS")
+    os.environ["ETHICAL_PLANNER_THREADS"] = str(threads)
+    try:
+        cp.collision_probability(*args, gate_sigmas=gate)
+        times = []
+        for _ in range(reps):
+            start = time.perf_counter()
+            cp.collision_probability(*args, gate_sigmas=gate)
+            times.append(time.perf_counter() - start)
+    finally:
+        if previous is None:
+            del os.environ["ETHICAL_PLANNER_THREADS"]
+        else:
+            os.environ["ETHICAL_PLANNER_THREADS"] = previous
+    return statistics.median(times) * 1e3
 
 
 def main() -> None:
@@ -97,13 +121,9 @@ def main() -> None:
         mean, cov, heading, length, width = road_users(n_obs, n_t, np.random.default_rng(0))
         args = (x, y, yaw, 4.508, 1.610, mean, cov, heading, length, width)
         result, survivors, calls = count_owens_t(args, gate)
-        times = []
-        for _ in range(reps):
-            start = time.perf_counter()
-            cp.collision_probability(*args, gate_sigmas=gate)
-            times.append(time.perf_counter() - start)
+        one = median_ms(args, gate, reps, threads=1)
+        two = median_ms(args, gate, reps, threads=2)
         triples = x.shape[0] * n_obs * n_t
-        median = statistics.median(times)
         rows.append(
             (
                 f"{x.shape[0]} x {n_obs} x {n_t}",
@@ -111,21 +131,22 @@ def main() -> None:
                 triples,
                 survivors / triples,
                 calls,
-                median * 1e3,
-                median / max(survivors, 1) * 1e6,
+                one,
+                two,
+                one / max(survivors, 1) * 1e3,
                 float(result.probability.max()),
             )
         )
     header = (
         f"{'n_traj x n_obs x n_t':>22} {'gate':>5} {'triples':>9} {'survive':>8} "
-        f"{'owens_t':>9} {'median ms':>10} {'us/surv':>8} {'max p':>6}"
+        f"{'owens_t':>9} {'1 thread ms':>12} {'2 threads ms':>13} {'us/surv':>8} {'max p':>6}"
     )
     print(header)
     print("-" * len(header))
-    for shape, gate, triples, frac, calls, ms, us, pmax in rows:
+    for shape, gate, triples, frac, calls, one, two, us, pmax in rows:
         print(
-            f"{shape:>22} {gate:>5} {triples:>9d} {frac:>8.1%} {calls:>9d} {ms:>10.1f} "
-            f"{us:>8.2f} {pmax:>6.3f}"
+            f"{shape:>22} {gate:>5} {triples:>9d} {frac:>8.1%} {calls:>9d} {one:>12.1f} "
+            f"{two:>13.1f} {us:>8.2f} {pmax:>6.3f}"
         )
 
 

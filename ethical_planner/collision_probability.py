@@ -12,21 +12,25 @@ mass is computed in closed form:
    are more than ``gate_sigmas`` standard deviations (largest axis) apart, so
    the integral below runs on the few triples that matter.
 2. Whitening with the Cholesky factor of Sigma turns the Gaussian into a
-   standard one and the octagon into another convex polygon. The octagon is the
-   sum of four centred segments (two edges per rectangle), so each of its edges
-   follows from the four whitened segments without sorting them by angle
+   standard one and the octagon into another convex polygon, the sum of four
+   centred segments (two edges per rectangle). Each of its eight edges follows
+   from the four whitened segments without sorting them by angle
    (:func:`_octagon_edges`).
 3. The standard bivariate normal mass of a convex polygon is a sum of Owen's T
-   functions, one pair per edge (see :func:`polygon_gaussian_mass`). On the hot
-   path Owen's T comes from a five-node Gauss-Legendre rule after the reflection
-   T(h, a) -> T(ah, 1/a) that keeps a <= 1 (:func:`_owens_t_unit`), edges that
-   cannot matter are skipped, and the work runs in chunks on reused scratch
-   buffers, split over two threads for large inputs.
+   functions, one pair per edge (see :func:`polygon_gaussian_mass`).
 
-Accuracy of ``collision_probability``: every Owen's T term is within 5e-9 of the
-exact value and skipped terms are below Q(6) / 2 = 5e-10, so p is within 1e-7 of
-the closed form (16 terms per octagon); ``polygon_gaussian_mass`` uses SciPy's
-``owens_t`` and is exact to rounding.
+``polygon_gaussian_mass`` evaluates Owen's T with SciPy and is exact to rounding.
+``collision_probability`` runs on the hot path and trades that for speed, within
+a bound: Owen's T comes from a five-node Gauss-Legendre rule in float32 after the
+reflection T(h, a) -> T(ah, 1/a) that keeps a <= 1 (each term within 3e-8,
+:func:`_owens_t_unit`), the normal tail Q from a table (2e-9), and edges farther
+than the gate radius from the mean are dropped (each below 7.6e-9, ``_FAR_MIN``).
+With 16 terms per octagon, p is within 1e-6 of the closed form; measured against
+the exact evaluation over 2.5 million triples, the largest difference was 5e-8.
+The work runs in chunks on reused scratch buffers (no allocation in the loop) and,
+for large inputs, on two threads (``ETHICAL_PLANNER_THREADS``, default
+min(2, CPU count), 1 inside a worker process); results do not depend on the
+number of threads.
 
 Everything is a pure function over struct-of-arrays inputs; nothing is mutated.
 """
@@ -34,6 +38,7 @@ Everything is a pure function over struct-of-arrays inputs; nothing is mutated.
 from __future__ import annotations
 
 import math
+import multiprocessing
 import os
 import threading
 from collections.abc import Callable, Sequence
@@ -47,8 +52,8 @@ from scipy.special import ndtr, owens_t
 
 __all__ = ["CollisionProbability", "collision_probability", "polygon_gaussian_mass"]
 
-T = TypeVar("T")
-J = TypeVar("J")
+_T = TypeVar("_T")
+_J = TypeVar("_J")
 
 #: An origin closer than this (whitened units) to an edge's line is "on" that line:
 #: the edge's triangle (origin, a, b) then has mass below 0.4 * 1e-12 and counts 0.
@@ -61,7 +66,6 @@ _H_SKIP = 8.5
 _D2_SKIP = 75.0
 #: Whitened edges shorter than this are degenerate (a zero footprint dimension).
 _MIN_EDGE = 1e-12
-_HALF_PI = 0.5 * math.pi
 
 #: Fast path: an edge whose closest point is r_min (whitened units) from the mean adds at
 #: most exp(-r_min^2 / 2) / 2 to p (the part of its wedge beyond the edge, times the wedge
@@ -86,17 +90,21 @@ _Q_STEP = 1.0 / 4096.0
 _Q_TABLE = ndtr(-np.arange(int(_FAR_MAX / _Q_STEP) + 2) * _Q_STEP)
 _Q_SLOPE = np.append(np.diff(_Q_TABLE), 0.0)
 
-#: Owen's T on the hot path is evaluated in float32: relative rounding 6e-8 on T <= 1/8
-#: adds at most 2.5e-8 to the Gauss-Legendre error (measured against SciPy).
+#: Owen's T on the hot path is evaluated in float32 (twice the SIMD width): rounding adds
+#: at most 2.6e-8 to the Gauss-Legendre error (measured against SciPy on a 1601 x 801 grid).
 _OWENS_DTYPE = np.float32
 
-#: Survivor triples per kernel call: large enough to amortise numpy's per-call cost,
-#: small enough that the scratch buffers stay in cache.
+#: Survivor triples per kernel call on one thread: large enough to amortise numpy's
+#: per-call cost, small enough that the scratch buffers stay in cache.
 _CHUNK = 4096
 #: Triples gated per block (a block of trajectories against all road users and steps).
 _GATE_BLOCK = 32768
-#: Below this many triples the work runs on the calling thread only.
-_PARALLEL_MIN = 16384
+#: With two threads numpy must run long loops between Python statements: each thread
+#: switch hands the GIL over (a wake-up of the other core, tens of us on a VM), so the
+#: threaded path uses 4x larger chunks and blocks, and only from this many triples on.
+_CHUNK_THREADED = 16384
+_GATE_BLOCK_THREADED = 131072
+_PARALLEL_MIN = 200_000
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,7 +137,7 @@ def collision_probability(
 ) -> CollisionProbability:
     """Probability that the ego footprint overlaps each road user's footprint.
 
-    p is within 1e-7 of the closed-form Gaussian mass of the octagon (see the module
+    p is within 1e-6 of the closed-form Gaussian mass of the octagon (see the module
     docstring); triples cut by the gate are exactly 0.
 
     Args:
@@ -235,15 +243,18 @@ def collision_probability(
     # Edges dropped beyond gate_sigmas whitened units, the gate's own scale (_FAR_MIN).
     far = min(max(gate_sigmas, _FAR_MIN), _FAR_MAX)
     problem = _Problem(n_traj, n_obs, n_t, obs_rows, ego_rows, degenerate, far)
-    # Blocks of trajectories: small enough for the cache, and at least a few per thread
-    # so that two threads finish together.
+    # Blocks of trajectories: small enough for the cache, at least two per thread so that
+    # the threads finish together.
     threads = _threads() if probability.size >= _PARALLEL_MIN else 1
-    block = max(1, min(_GATE_BLOCK // (n_obs * n_t), -(-n_traj // (4 * threads))))
+    chunk, gate_block = (_CHUNK, _GATE_BLOCK) if threads == 1 else (_CHUNK_THREADED, _GATE_BLOCK_THREADED)
+    block = max(1, min(gate_block // (n_obs * n_t), -(-n_traj // (2 * threads))))
     jobs = [(start, min(start + block, n_traj)) for start in range(0, n_traj, block)]
 
     def run(job: tuple[int, int]) -> None:
         start, stop = job
-        _gate_and_integrate(problem, start, stop, probability[start:stop], mean_overlap[start:stop])
+        _gate_and_integrate(
+            problem, start, stop, chunk, probability[start:stop], mean_overlap[start:stop]
+        )
 
     # Each block writes its own rows of the outputs, so the result does not depend on
     # which thread runs which block.
@@ -410,7 +421,9 @@ class _Problem:
     """Inputs of one ``collision_probability`` call, flattened for gathers.
 
     Attributes:
-        n_traj, n_obs, n_t: problem size.
+        n_traj: number of candidates.
+        n_obs: number of road users.
+        n_t: number of steps.
         obs_rows: per-(obs, t) rows (see collision_probability), shape (15, n_obs * n_t).
         ego_rows: per-(traj, t) rows x, y, L cos, -W sin, L sin, W cos, shape (6, n_traj * n_t).
         degenerate: a footprint has a zero length or width (zero-length edges).
@@ -427,10 +440,10 @@ class _Problem:
 
 
 class _Scratch(threading.local):
-    """Per-thread scratch buffers, reused across calls.
+    """Per-thread scratch buffers, reused across calls (about 10 MB, 40 MB when threaded).
 
     Temporaries of a few hundred kB are slow to allocate: glibc returns them to the
-    kernel on free and every new one page-faults (about 10x the cost of the arithmetic
+    kernel on free and every new one page-faults (up to 10x the cost of the arithmetic
     on the VMs measured). The kernels below write into these buffers instead.
     """
 
@@ -463,7 +476,11 @@ _POOL_LOCK = threading.Lock()
 
 
 def _threads() -> int:
-    """Threads for large inputs: ETHICAL_PLANNER_THREADS, else min(2, CPU count)."""
+    """Threads for large inputs: ETHICAL_PLANNER_THREADS, else min(2, CPU count).
+
+    Inside a worker process (a batch of scenarios on a process pool) the default is 1:
+    the cores are already busy with the other workers.
+    """
     value = os.environ.get("ETHICAL_PLANNER_THREADS")
     if value:
         try:
@@ -472,6 +489,8 @@ def _threads() -> int:
             raise ValueError(
                 f"ETHICAL_PLANNER_THREADS must be a positive integer, got {value!r}"
             ) from None
+    if multiprocessing.parent_process() is not None:
+        return 1
     return min(2, os.cpu_count() or 1)
 
 
@@ -489,13 +508,13 @@ def _executor() -> ThreadPoolExecutor | None:
         return _POOL[1]
 
 
-def _submit(function: Callable[[], T]) -> Future[T] | None:
+def _submit(function: Callable[[], _T]) -> Future[_T] | None:
     """Run ``function`` on a helper thread; None (run it yourself) without helpers."""
     pool = _executor()
     return None if pool is None else pool.submit(function)
 
 
-def _parallel_for(jobs: Sequence[J], run: Callable[[J], None]) -> None:
+def _parallel_for(jobs: Sequence[_J], run: Callable[[_J], None]) -> None:
     """Run ``run(job)`` for every job on the calling thread and the helper threads.
 
     Jobs are handed out one at a time from a shared iterator, so a helper that is busy
@@ -530,13 +549,20 @@ def _parallel_for(jobs: Sequence[J], run: Callable[[J], None]) -> None:
 
 
 def _gate_and_integrate(
-    problem: _Problem, start: int, stop: int, probability: np.ndarray, mean_overlap: np.ndarray
+    problem: _Problem,
+    start: int,
+    stop: int,
+    chunk: int,
+    probability: np.ndarray,
+    mean_overlap: np.ndarray,
 ) -> None:
     """Gate trajectories ``start:stop`` against every (obs, t) and integrate the survivors.
 
     Args:
         problem: the flattened inputs.
-        start, stop: trajectory range.
+        start: first trajectory of the block.
+        stop: one past its last trajectory.
+        chunk: survivors per kernel call.
         probability: output rows ``start:stop``, shape (stop - start, n_obs, n_t), written.
         mean_overlap: output rows, same shape, written.
 
@@ -563,8 +589,8 @@ def _gate_and_integrate(
     p_flat = probability.reshape(-1)
     overlap_flat = mean_overlap.reshape(-1)
     per_traj = n_obs * n_t
-    for first in range(0, survivors.size, _CHUNK):
-        flat = survivors[first : first + _CHUNK]
+    for first in range(0, survivors.size, chunk):
+        flat = survivors[first : first + chunk]
         m = flat.size
         # Flat triple index (traj, obs, t) -> (obs, t) and (traj, t) row indices.
         o = _SCRATCH.get("idx_o", (m,), np.intp)
@@ -594,27 +620,37 @@ def _octagon_mass(problem: _Problem, o: np.ndarray, e: np.ndarray) -> tuple[np.n
         views into scratch buffers, valid until the next call on this thread.
 
     """
-    h, t1, t2, inside = _octagon_edges(problem, o, e)
+    h, t1, t2 = _octagon_edges(problem, o, e)
     m = o.size
     get = _SCRATCH.get
-    ah = get("abs_h", (8, m))
-    np.abs(h, out=ah)
-    winding = _winding_fast(h, ah, t1, t2)
+    # The mean lies in the closed octagon (touching counts) when it is on the inner side
+    # of every edge line, and strictly inside (winding number 1) when strictly so.
+    lowest = get("lowest_h", (m,))
+    np.minimum.reduce(h, axis=0, out=lowest)
+    inside = get("inside", (m,), np.bool_)
+    np.greater(lowest, -_H_TOL, out=inside)
+    winding = get("winding", (m,))
+    np.greater(lowest, 0.0, out=winding, casting="unsafe")
     # An edge's term is the mass of the part of its wedge beyond the edge, all at least
     # r_min (the edge's distance from the origin) away: below exp(-r_min^2 / 2) / 2.
-    # Keep edges with r_min < far (and off the origin's line, see _winding); typically
-    # about half of them. Compress those, integrate, add back per triple.
-    near = get("near_t", (8, m))
-    np.minimum(t2, 0.0, out=near)
-    np.maximum(near, t1, out=near)  # the edge point nearest to the foot of h, along u
-    near *= near
+    # Keep edges with r_min < far and off the origin's line (|h| >= _H_TOL, see
+    # _winding); typically about half of them. Compress those, integrate, add back.
+    h2 = get("h2", (8, m))
+    np.multiply(h, h, out=h2)
+    np.minimum.reduce(h2, axis=0, out=lowest)
+    on_line = np.flatnonzero(lowest < _H_TOL * _H_TOL)
+    if on_line.size:
+        rows = (slice(None), on_line)
+        winding[on_line] = _winding(h[rows], t1[rows], t2[rows], h2[rows] < _H_TOL * _H_TOL)
     r2 = get("r2", (8, m))
-    np.multiply(h, h, out=r2)
-    r2 += near
+    np.minimum(t2, 0.0, out=r2)
+    np.maximum(r2, t1, out=r2)  # the edge point nearest to the foot of h, along u
+    r2 *= r2
+    r2 += h2
     active = get("active", (8, m), np.bool_)
     test = get("active_test", (8, m), np.bool_)
     np.less(r2, problem.far * problem.far, out=active)
-    np.greater_equal(ah, _H_TOL, out=test)
+    np.greater_equal(h2, _H_TOL * _H_TOL, out=test)
     active &= test
     where = np.flatnonzero(active)
     n = where.size
@@ -636,21 +672,20 @@ def _octagon_mass(problem: _Problem, o: np.ndarray, e: np.ndarray) -> tuple[np.n
 
 def _octagon_edges(
     problem: _Problem, o: np.ndarray, e: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Whitened edges of the Minkowski octagons, as distances and spans from the origin.
 
-    The octagon is the sum of four centred segments g_k (the ego's and the road user's
-    whitened edge vectors, k = 0, 1 road user, 2, 3 ego), a zonotope. Its face with
-    outward normal n_k = (u_ky, -u_kx), u_k = g_k / |g_k|, lies at
-    rho_k = sum_{i != k} |g_k x g_i| / (2 |g_k|) from the centre z, and the face's
-    midpoint is shifted along u_k by sum_{i != k} s_ki (g_k . g_i) / (2 |g_k|),
-    s_ki = -sign(g_k x g_i) (the side of n_k that g_i points to); the opposite face
-    is the mirror image through z. Parallel segments (a zero cross product) may take
-    either sign as long as s_ik = -s_ki, which splits their common face in two.
-    So edge k runs, in the frame (u_k, n_k) around the origin (the road user's mean),
-    at distance h = rho_k + z . n_k from t1 = tau_k + z . u_k to t2 = t1 + |g_k|, and
-    edge k + 4 at h = rho_k - z . n_k from t1 = tau_k - z . u_k, tau_k the start of the
-    face relative to its shifted midpoint.
+    The octagon is the sum of four centred segments g_k (the road user's and the ego's
+    whitened edge vectors, k = 0, 1 road user, 2, 3 ego), a zonotope. With
+    u_k = g_k / |g_k| and n_k = (u_ky, -u_kx), its face with outward normal n_k lies
+    rho_k = sum_{i != k} |g_k x g_i| / (2 |g_k|) from the centre z and runs along u_k
+    from tau_k = sum_{i != k} s_ki (g_k . g_i) / (2 |g_k|) - |g_k| / 2 to tau_k + |g_k|
+    (relative to z), s_ki = -sign(g_k x g_i), the side of n_k that g_i points to. The
+    opposite face, direction -u_k, is its mirror image through z. Parallel segments
+    (a zero cross product) may take either sign as long as s_ik = -s_ki: they split
+    their common face in two. Seen from the origin (the road user's mean), edge k has
+    h = rho_k + z . n_k and t1 = tau_k + z . u_k, edge k + 4 has h = rho_k - z . n_k and
+    t1 = tau_k - z . u_k, both t2 = t1 + |g_k| (the conventions of polygon_gaussian_mass).
 
     Args:
         problem: the flattened inputs.
@@ -659,8 +694,7 @@ def _octagon_edges(
 
     Returns:
         h, t1, t2 of the eight edges, shape (8, m) each (whitened units; degenerate
-        edges have h = t1 = t2 = 0), and whether the origin lies in the closed
-        octagon, shape (m,). Views into scratch buffers.
+        edges have h = t1 = t2 = 0). Views into scratch buffers.
 
     """
     m = o.size
@@ -745,14 +779,13 @@ def _octagon_edges(
     # is scaled by 2 |g_k| until the one multiplication by 1 / (2 |g_k|) below.
     across_z = get("across_z", (4, m))
     along_z = get("along_z", (4, m))
+    z *= 2.0
     np.multiply(seg_y, z[0], out=across_z)
     np.multiply(seg_x, z[1], out=tmp)
     across_z -= tmp
-    across_z *= 2.0
     np.multiply(seg_x, z[0], out=along_z)
     np.multiply(seg_y, z[1], out=tmp)
     along_z += tmp
-    along_z *= 2.0
 
     h = get("h", (8, m))
     t1 = get("t1", (8, m))
@@ -762,39 +795,15 @@ def _octagon_edges(
     np.add(tau, along_z, out=t1[:4])
     np.subtract(tau, along_z, out=t1[4:])
     # Edges k and k + 4 share |g_k|: view (8, m) as (2, 4, m) to scale both at once.
-    h.reshape(2, 4, m).__imul__(half_inv)
+    h_pairs = h.reshape(2, 4, m)
+    h_pairs *= half_inv
     t1_pairs = t1.reshape(2, 4, m)
     t1_pairs *= half_inv
     np.multiply(seg_len, 0.5, out=tmp)
     t1_pairs -= tmp
     np.add(t1_pairs, seg_len, out=t2.reshape(2, 4, m))
 
-    # Closed octagon: touching counts. Degenerate edges have h = 0 and never exclude.
-    outside = get("outside", (8, m), np.bool_)
-    np.less_equal(h, -_H_TOL, out=outside)
-    inside = get("inside", (m,), np.bool_)
-    np.logical_or.reduce(outside, axis=0, out=inside)
-    np.logical_not(inside, out=inside)
-    return h, t1, t2, inside
-
-
-def _winding_fast(h: np.ndarray, abs_h: np.ndarray, t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
-    """``_winding`` of (8, m) edges into a scratch buffer; ``abs_h`` = |h|. See there."""
-    m = h.shape[1]
-    flags = _SCRATCH.get("edge_flags", (8, m), np.bool_)
-    winding_flag = _SCRATCH.get("winding_flag", (m,), np.bool_)
-    np.greater(h, 0.0, out=flags)
-    np.logical_and.reduce(flags, axis=0, out=winding_flag)
-    winding = _SCRATCH.get("winding", (m,))
-    winding[...] = winding_flag
-    np.less(abs_h, _H_TOL, out=flags)
-    np.logical_or.reduce(flags, axis=0, out=winding_flag)
-    if winding_flag.any():
-        # Degenerate (zero-length) edges have h = 0 and t1 = t2: they are "on line" and
-        # count 0 there, as they should.
-        rows = np.flatnonzero(winding_flag)
-        winding[rows] = _winding(h[:, rows], t1[:, rows], t2[:, rows], flags[:, rows])
-    return winding
+    return h, t1, t2
 
 
 def _edge_terms(h: np.ndarray, t: np.ndarray, far: float) -> np.ndarray:

@@ -95,9 +95,11 @@ def total_cost(
         risks: (n, m) the set S_R: R_k for every road user, R_ego,k for every
             partner, and the ego's boundary risk.
         r: (n, m) responsibility of each entry.
-        harms, counted: (n, m) harm of each entry and whether it counts for maximin.
+        harms: (n, m) harm of each entry.
+        counted: (n, m) whether it counts for maximin.
         ego_combined: (n,) R_ego (Eq. 4).
-        jerk_lon, jerk_lat: (n,) integrated squared jerk [m^2/s^5].
+        jerk_lon: (n,) integrated squared longitudinal jerk [m^2/s^5].
+        jerk_lat: (n,) integrated squared lateral jerk [m^2/s^5].
         speed_deviation: (n,) mean |v - v_desired| [m/s].
         path_deviation: (n,) mean |d| from the reference path [m].
         levels: (n,) validity levels.

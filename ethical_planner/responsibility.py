@@ -112,9 +112,12 @@ class LegalCorridors:
         return lowest, np.minimum(highest, self.stop_distance)
 
 
-def base_responsibility(mass: np.ndarray, motorised: np.ndarray, config: ResponsibilityConfig) -> np.ndarray:
+def base_responsibility(
+    mass: np.ndarray, motorised: np.ndarray, config: ResponsibilityConfig
+) -> np.ndarray:
     """r_base = base_max (1 - exp(-m / scale)) for motorised road users, else 0."""
-    return np.where(motorised, config.base_max * (1.0 - np.exp(-np.asarray(mass) / config.base_mass_scale)), 0.0)
+    base = config.base_max * (1.0 - np.exp(-np.asarray(mass) / config.base_mass_scale))
+    return np.where(motorised, base, 0.0)
 
 
 def responsibilities(
@@ -147,16 +150,24 @@ def responsibilities(
     r_obs, r_ego = base_obs, base_ego
     if k == 0:
         return r_obs, r_ego
+    n_t = probability.shape[2]
     step = probability.argmax(axis=2)  # (n, k)
-    rows = np.arange(n)[:, None]
-    ex, ey, eyaw = candidates.x[rows, step], candidates.y[rows, step], candidates.yaw[rows, step]
-    obs = np.arange(k)[None, :]
-    ox, oy = prediction.mean[obs, step, 0], prediction.mean[obs, step, 1]
-    oyaw = prediction.heading[obs, step]
+    # The highest probability itself: argmax is several times faster than max over this
+    # short last axis, and it is needed anyway.
+    peak = np.take_along_axis(probability, step[..., None], axis=2)[..., 0]
+    # Rows of the (traj, t) and (obs, t) tables at the peak step, gathered flat.
+    ego_row = np.arange(n)[:, None] * n_t + step
+    obs_row = np.arange(k)[None, :] * n_t + step
+    ex, ey = candidates.x.ravel()[ego_row], candidates.y.ravel()[ego_row]
+    eyaw = candidates.yaw.ravel()[ego_row]
+    ox = prediction.mean[..., 0].ravel()[obs_row]
+    oy = prediction.mean[..., 1].ravel()[obs_row]
+    oyaw = prediction.heading.ravel()[obs_row]
 
     # Rear-end: same direction of travel, one body's front meets the other's rear.
     ego_angle, obs_angle = impact_angles(ex, ey, eyaw, ox, oy, oyaw)
-    same_direction = np.abs(np.angle(np.exp(1j * (eyaw - oyaw)))) < _FRONT
+    # |yaw difference wrapped to (-pi, pi]| < 45 deg.
+    same_direction = np.abs(np.remainder(eyaw - oyaw + np.pi, 2.0 * np.pi) - np.pi) < _FRONT
     ego_follows = same_direction & (np.abs(ego_angle) < _FRONT) & (np.abs(obs_angle) > _REAR)
     obs_follows = same_direction & (np.abs(obs_angle) < _FRONT) & (np.abs(ego_angle) > _REAR)
     r_ego = r_ego + np.where(ego_follows, config.rear_end, 0.0)
@@ -169,7 +180,11 @@ def responsibilities(
     dx, dy = ox - corridors.x0, oy - corridors.y0
     lon = dx * c0 + dy * s0
     lat = -dx * s0 + dy * c0
-    lowest, highest = corridors.longitudinal_bounds(candidates.t[step])
+    # The bounds depend on (t, obs) only: an (n_t, k) table, gathered at the peak steps.
+    lowest, highest = corridors.longitudinal_bounds(candidates.t[:, None])
+    step_obs = step * k + np.arange(k)[None, :]
+    lowest = np.broadcast_to(lowest, (n_t, k)).ravel()[step_obs]
+    highest = np.broadcast_to(highest, (n_t, k)).ravel()[step_obs]
     legal = (
         (lon <= highest + _LEGAL_TOLERANCE)
         & (lon >= lowest - _LEGAL_TOLERANCE)
@@ -177,7 +192,7 @@ def responsibilities(
     )
     r_obs = r_obs + np.where(legal, 0.0, config.rule_violation)
     # Without any chance of collision there is nothing to be responsible for beyond the base.
-    possible = probability.max(axis=2) > 0.0
+    possible = peak > 0.0
     r_obs = np.where(possible, r_obs, base_obs)
     r_ego = np.where(possible, r_ego, base_ego)
     return r_obs, r_ego

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from .collision_probability import _parallel_for, _submit, collision_probability
+from .collision_probability import _parallel_for, _submit, _threads, collision_probability
 from .config import RiskConfig
 from .environment import RoadEnvironment
 from .harm import HarmModel, boundary_harm, collision_harm
@@ -59,6 +59,10 @@ def footprint_corners(
     half_w = 0.5 * width * np.array([1.0, -1.0, -1.0, 1.0])
     return x[..., None] + c * half_l - s * half_w, y[..., None] + s * half_l + c * half_w
 
+
+#: From this many candidate poses (n * n_t) the road-edge test overlaps the collision
+#: probability on a helper thread.
+_OVERLAP_MIN_POSES = 20_000
 
 #: Extra inward margin [m] of the eroded drivable area, above the sagitta of shapely's
 #: arc approximation (r (1 - cos(pi / 32)) < 0.5 % of r at quad_segs = 8) and rounding.
@@ -113,8 +117,11 @@ def assess_risk(
     """Collision probability, harm and risk of every candidate for every road user."""
     n, n_t = candidates.x.shape
     k = prediction.n_obs
-    # shapely releases the GIL: the road-edge test runs beside the collision probability.
-    outside_job = _submit(lambda: outside_drivable_area(candidates, ego_shape, environment))
+    # shapely releases the GIL: on large problems the road-edge test runs on a helper
+    # thread beside the collision probability (on small ones the hand-over costs more).
+    outside_job = None
+    if k and n * n_t >= _OVERLAP_MIN_POSES:
+        outside_job = _submit(lambda: outside_drivable_area(candidates, ego_shape, environment))
     cp = collision_probability(
         candidates.x, candidates.y, candidates.yaw, ego_shape.length, ego_shape.width,
         prediction.mean, prediction.cov, prediction.heading, prediction.length,
@@ -125,26 +132,13 @@ def assess_risk(
     harm_ego = np.zeros((n, k, n_t))
     risk_obs = np.zeros((n, k))
     risk_ego = np.zeros((n, k))
-    # Triples with p > 0 in (traj, obs, t) order; rows of the (traj, t) and (obs, t) tables.
+    # Triples with p > 0, in (traj, obs, t) order.
     flat = np.flatnonzero(p > 0.0)
     if flat.size:
-        per_traj = k * n_t
-        step = flat % n_t
-        pair = flat // n_t  # (traj, obs)
-        ego_row = (flat // per_traj) * n_t + step
-        obs_row = flat % per_traj
-        obs_index = obs_row // n_t
-        harms = _harm_of_survivors(
-            candidates, prediction, ego_mass, config, ego_row, obs_row, obs_index
+        _harm_and_risk(
+            candidates, prediction, ego_mass, config, p, flat,
+            (harm_obs, harm_ego, risk_obs, risk_ego),
         )
-        harm_obs.ravel()[flat] = harms[0]
-        harm_ego.ravel()[flat] = harms[1]
-        # R = max over t of p H (Eq. 3): p H is 0 where p = 0, so the maximum over the
-        # surviving steps of each (traj, obs) pair, >= 0, is the same.
-        p_s = p.ravel()[flat]
-        starts = np.flatnonzero(np.diff(pair, prepend=-1))
-        risk_obs.ravel()[pair[starts]] = np.maximum.reduceat(p_s * harms[0], starts)
-        risk_ego.ravel()[pair[starts]] = np.maximum.reduceat(p_s * harms[1], starts)
     peak_step = p.argmax(axis=2) if n_t else np.zeros((n, k), dtype=int)
 
     outside = (
@@ -172,26 +166,36 @@ def assess_risk(
     )
 
 
-def _harm_of_survivors(
+#: Triples per harm evaluation: the temporaries of ``collision_harm`` then stay small and
+#: are reused instead of page-faulting. With two threads (from _HARM_PARALLEL_MIN triples
+#: on) the chunks are a quarter of the work each: numpy must run long loops between
+#: Python statements for two threads to pay off (see collision_probability._CHUNK_THREADED).
+_HARM_CHUNK = 16384
+_HARM_PARALLEL_MIN = 100_000
+
+
+def _harm_and_risk(
     candidates: Candidates,
     prediction: Prediction,
     ego_mass: float,
     config: RiskConfig,
-    ego_row: np.ndarray,
-    obs_row: np.ndarray,
-    obs_index: np.ndarray,
-) -> np.ndarray:
-    """Harm of the road user and of the ego at the m given (traj, obs, t) triples.
+    p: np.ndarray,
+    flat: np.ndarray,
+    out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+) -> None:
+    """Harm at the triples with p > 0 and the risks R = max_t p H (Eq. 3), in chunks.
 
     Args:
-        candidates, prediction, ego_mass, config: as for ``assess_risk``.
-        ego_row: traj * n_t + t of each triple, shape (m,).
-        obs_row: obs * n_t + t, shape (m,).
-        obs_index: obs, shape (m,).
-
-    Returns:
-        (harm_obs, harm_ego), shape (2, m).
+        candidates: the n candidates.
+        prediction: the k road users.
+        ego_mass: [kg].
+        config: harm models.
+        p: collision probabilities, shape (n, k, t).
+        flat: flat indices of the triples with p > 0, ascending, shape (m,).
+        out: harm_obs, harm_ego (n, k, t) and risk_obs, risk_ego (n, k), zeros, written.
     """
+    n_traj, k, n_t = p.shape
+    harm_obs, harm_ego, risk_obs, risk_ego = out
     # Velocities per (traj, t) and (obs, t) once, then gathered: trigonometry on the
     # small tables instead of on every triple.
     ego_yaw = candidates.yaw.ravel()
@@ -209,36 +213,50 @@ def _harm_of_survivors(
             obs_speed * np.cos(obs_yaw), obs_speed * np.sin(obs_yaw),
         ]
     )
+    obs_mass = prediction.mass
+    obs_unprotected = prediction.vulnerable
     model = HarmModel(config.harm_model)
     pedestrian_model = HarmModel(config.pedestrian_model)
-    out = np.empty((2, ego_row.size))
+    # Chunk boundaries at the start of a (traj, obs) pair, so that each chunk owns the
+    # risks of its pairs: chunks then write disjoint parts of every output.
+    size = _HARM_CHUNK
+    if flat.size >= _HARM_PARALLEL_MIN and _threads() > 1:
+        size = max(size, -(-flat.size // 4))
+    cuts = [0]
+    while cuts[-1] + size < flat.size:
+        pair_start = (flat[cuts[-1] + size] // n_t) * n_t
+        cut = int(np.searchsorted(flat, pair_start))
+        cuts.append(cut if cut > cuts[-1] else cuts[-1] + size)
+    cuts.append(flat.size)
+    p_flat = p.ravel()
 
-    def run(part: slice) -> None:
-        ego = ego_table.take(ego_row[part], axis=1)
-        obs = obs_table.take(obs_row[part], axis=1)
-        index = obs_index[part]
+    def run(part: tuple[int, int]) -> None:
+        f = flat[part[0] : part[1]]
+        pair, step = np.divmod(f, n_t)
+        traj, obs = np.divmod(pair, k)
+        ego = ego_table.take(traj * n_t + step, axis=1)
+        obs_now = obs_table.take(obs * n_t + step, axis=1)
         result = collision_harm(
             ego_mass=ego_mass,
             ego_vel=ego[3:5].T,
             ego_pos=ego[0:2].T,
             ego_yaw=ego[2],
-            obs_mass=prediction.mass.take(index),
-            obs_vel=obs[3:5].T,
-            obs_pos=obs[0:2].T,
-            obs_yaw=obs[2],
-            obs_unprotected=prediction.vulnerable.take(index),
+            obs_mass=obs_mass.take(obs),
+            obs_vel=obs_now[3:5].T,
+            obs_pos=obs_now[0:2].T,
+            obs_yaw=obs_now[2],
+            obs_unprotected=obs_unprotected.take(obs),
             model=model,
             pedestrian_model=pedestrian_model,
         )
-        out[0, part] = result.harm_obs
-        out[1, part] = result.harm_ego
+        harm_obs.ravel()[f] = result.harm_obs
+        harm_ego.ravel()[f] = result.harm_ego
+        # p H is 0 where p = 0, so the maximum over the surviving steps of a pair equals
+        # the maximum over all its steps (R >= 0).
+        p_f = p_flat.take(f)
+        starts = np.flatnonzero(np.diff(pair, prepend=-1))
+        risk_obs.ravel()[pair[starts]] = np.maximum.reduceat(p_f * result.harm_obs, starts)
+        risk_ego.ravel()[pair[starts]] = np.maximum.reduceat(p_f * result.harm_ego, starts)
 
-    # Elementwise, so any split gives the same numbers; two halves keep two cores busy.
-    m = ego_row.size
-    parts = [slice(0, m)] if m < _HARM_PARALLEL_MIN else [slice(0, m // 2), slice(m // 2, m)]
-    _parallel_for(parts, run)
-    return out
-
-
-#: Below this many triples harm is evaluated on the calling thread only.
-_HARM_PARALLEL_MIN = 50_000
+    # Elementwise per triple and disjoint per chunk: any split gives the same numbers.
+    _parallel_for(list(zip(cuts[:-1], cuts[1:], strict=True)), run)

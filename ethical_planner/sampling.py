@@ -97,7 +97,11 @@ def quartic_coefficients(
     """Coefficients c0..c4 of s(t) with s(0)=s0, s'(0)=v0, s''(0)=a0, s'(T)=v_end, s''(T)=0.
 
     Args:
-        v_end, horizon: broadcastable arrays [m/s], [s].
+        s0: start position [m].
+        v0: start speed [m/s].
+        a0: start acceleration [m/s^2].
+        v_end: end speeds [m/s], broadcastable with ``horizon``.
+        horizon: horizons T [s].
 
     Returns:
         Shape (..., 5), lowest power first.
@@ -134,35 +138,39 @@ def _polynomial_derivatives(coeffs: np.ndarray, t: np.ndarray, horizon: np.ndarr
     """Value and first three time derivatives of polynomials, held past their horizon.
 
     After t = T the motion continues with the end velocity and zero acceleration.
-    Candidates share one to three horizons, so each horizon's power basis
-    tt^p, tt = min(t, T), is built once and the derivatives are matrix products
-    (coefficients of the derivative) @ (basis), instead of a power per element.
+    Candidates share one to three horizons, so the powers tt^p, tt = min(t, T), are
+    computed once per horizon on (n_t,) instead of per element; the sums keep their
+    order, so the results are the same to the last bit (a stopped candidate's heading,
+    atan2 of two rounding residues, depends on those bits).
 
     Args:
-        coeffs: (n_traj, k) lowest power first. t: (n_t,). horizon: (n_traj,).
+        coeffs: (n_traj, k) lowest power first.
+        t: times [s], shape (n_t,).
+        horizon: horizon T of each polynomial [s], shape (n_traj,).
 
     Returns:
         Shape (4, n_traj, n_t): value, first, second, third derivative.
     """
     n, k = coeffs.shape
     out = np.zeros((4, n, t.size))
-    # d^order/dt^order of sum_p c_p t^p = sum_p c_p p!/(p - order)! t^(p - order).
-    powers = np.arange(k)
-    derivative_coeffs = []
-    for order in range(4):  # four derivative orders, not a loop over data
-        falling = np.ones(k - order) if order == 0 else np.prod(
-            powers[order:, None] - np.arange(order)[None, :], axis=1
-        ).astype(float)
-        derivative_coeffs.append(coeffs[:, order:] * falling)
-    for value in np.unique(horizon):  # one to three horizons
+    degree = k - 1
+    for value in np.unique(horizon):  # one to three horizons, not per trajectory
         rows = np.flatnonzero(horizon == value)
         if rows[-1] - rows[0] + 1 == rows.size:  # contiguous, as sample_candidates builds them
             rows = slice(rows[0], rows[-1] + 1)
         tt = np.minimum(t, value)
-        basis = tt[None, :] ** powers[:, None]  # (k, n_t)
-        for order, dc in enumerate(derivative_coeffs):
-            if dc.shape[1]:
-                out[order, rows] = dc[rows] @ basis[: dc.shape[1]]
+        powers = np.stack([tt**p for p in range(degree + 1)])  # (k, n_t)
+        c = coeffs[rows].T[:, :, None]  # (k, n, 1)
+        for order in range(4):  # four derivative orders, not a loop over data
+            if order > degree:
+                continue
+            # factor_p c_p tt^(p - order) for p = order..degree, (k - order, n, n_t),
+            # summed over p in order (a reduction over the first axis is sequential).
+            factors = np.array(
+                [np.prod(np.arange(p - order + 1, p + 1)) if order else 1.0 for p in range(order, k)]
+            )
+            terms = factors[:, None, None] * c[order:] * powers[: k - order, None, :]
+            np.add.reduce(terms, axis=0, out=out[order, rows])
         past = t > value
         if past.any():
             overtime = np.maximum(t - value, 0.0)
@@ -207,13 +215,21 @@ def sample_candidates(
     end_offset = np.concatenate(offsets)
     horizon = np.concatenate(horizons)
 
-    lon = _polynomial_derivatives(
-        quartic_coefficients(start.s, start.s_dot, start.s_ddot, end_speed, horizon), t, horizon
-    )
-    lat = _polynomial_derivatives(
-        quintic_coefficients(start.d, start.d_dot, start.d_ddot, end_offset, horizon), t, horizon
-    )
-    return frenet_to_candidates(t, lon, lat, path, end_speed, end_offset, horizon)
+    lon_coeffs = quartic_coefficients(start.s, start.s_dot, start.s_ddot, end_speed, horizon)
+    lat_coeffs = quintic_coefficients(start.d, start.d_dot, start.d_ddot, end_offset, horizon)
+    out = _empty_states(len(end_speed), n_t)
+    # Blocks of trajectories, not single ones: every temporary then stays small enough to
+    # be reused by the allocator instead of page-faulting in a fresh mapping.
+    for first in range(0, len(end_speed), _BLOCK):
+        block = slice(first, first + _BLOCK)
+        _cartesian_states(
+            t,
+            _polynomial_derivatives(lon_coeffs[block], t, horizon[block]),
+            _polynomial_derivatives(lat_coeffs[block], t, horizon[block]),
+            path,
+            {name: array[block] for name, array in out.items()},
+        )
+    return _candidates(t, out, end_speed, end_offset, horizon)
 
 
 def emergency_braking(
@@ -257,7 +273,49 @@ def frenet_to_candidates(
         lon: (4, n, n_t) s and its first three time derivatives.
         lat: (4, n, n_t) d and its first three time derivatives.
         path: reference path.
-        end_speed, end_offset, horizon: (n,) sampling parameters to keep.
+        end_speed: (n,) end speeds [m/s], kept as a sampling parameter.
+        end_offset: (n,) end offsets [m], kept.
+        horizon: (n,) horizons [s], kept.
+    """
+    out = _empty_states(lon.shape[1], len(t))
+    _cartesian_states(t, lon, lat, path, out)
+    return _candidates(t, out, end_speed, end_offset, horizon)
+
+
+#: Trajectories converted per block (see sample_candidates).
+_BLOCK = 256
+_STATE_NAMES = ("x", "y", "yaw", "v", "a", "kappa", "s", "d", "s_dot", "jerk_lon", "jerk_lat")
+
+
+def _empty_states(n: int, n_t: int) -> dict[str, np.ndarray]:
+    """Uninitialised per-step (n, n_t) and per-candidate (n,) output arrays by name."""
+    return {
+        name: np.empty(n if name.startswith("jerk") else (n, n_t)) for name in _STATE_NAMES
+    }
+
+
+def _candidates(
+    t: np.ndarray,
+    out: dict[str, np.ndarray],
+    end_speed: np.ndarray,
+    end_offset: np.ndarray,
+    horizon: np.ndarray,
+) -> Candidates:
+    """Wrap filled output arrays (see _empty_states) as ``Candidates``."""
+    return Candidates(t=t, end_speed=end_speed, end_offset=end_offset, horizon=horizon, **out)
+
+
+def _cartesian_states(
+    t: np.ndarray, lon: np.ndarray, lat: np.ndarray, path: ReferencePath, out: dict[str, np.ndarray]
+) -> None:
+    """Cartesian states of Frenet motions, written into ``out`` (see _empty_states).
+
+    Args:
+        t: (n_t,) [s].
+        lon: (4, n, n_t) s and its first three time derivatives.
+        lat: (4, n, n_t) d and its first three time derivatives.
+        path: reference path.
+        out: arrays of shape (n, n_t), jerks (n,), written.
     """
     s, s_dot, s_ddot, s_dddot = lon
     d, d_dot, d_ddot, d_dddot = lat
@@ -265,67 +323,64 @@ def frenet_to_candidates(
     x_r, y_r, theta_r, kappa_r, dkappa_r = path.evaluate(s)
 
     # Velocity and acceleration in the path's (tangent, normal) frame, exact. Written
-    # with in-place operations: every temporary of this size costs page faults.
+    # with in-place operations (every temporary of this size costs page faults) but
+    # the same operations in the same order as the plain formulas, so the results are
+    # the same to the last bit (see _polynomial_derivatives).
     one_minus_kd = kappa_r * d
     np.subtract(1.0, one_minus_kd, out=one_minus_kd)
     along = s_dot * one_minus_kd
     across = d_dot
-    s_dot_kappa = s_dot * kappa_r
     # along_dot = s'' (1 - kappa d) - s' (kappa' s' d + kappa d')
     along_dot = dkappa_r * s_dot
     along_dot *= d
     tmp = kappa_r * d_dot
     along_dot += tmp
-    along_dot *= s_dot
+    np.multiply(s_dot, along_dot, out=along_dot)
     np.multiply(s_ddot, one_minus_kd, out=tmp)
     np.subtract(tmp, along_dot, out=along_dot)
-    acc_t = across * s_dot_kappa
+    # acc_t = along_dot - across s' kappa, acc_n = along s' kappa + d''
+    acc_t = across * s_dot
+    acc_t *= kappa_r
     np.subtract(along_dot, acc_t, out=acc_t)
-    acc_n = along * s_dot_kappa
+    acc_n = along * s_dot
+    acc_n *= kappa_r
     acc_n += d_ddot
-    speed = along * along
-    np.multiply(across, across, out=tmp)
-    speed += tmp
-    np.sqrt(speed, out=speed)
+    speed = out["v"]
+    np.hypot(along, across, out=speed)
     safe = np.maximum(speed, 1e-9)
     moving = speed > 1e-3
     # kappa = (along acc_n - across acc_t) / |v|^3, a = (along acc_t + across acc_n) / |v|
-    kappa = along * acc_n
+    kappa = out["kappa"]
+    np.multiply(along, acc_n, out=kappa)
     np.multiply(across, acc_t, out=tmp)
     kappa -= tmp
-    accel = along * acc_t
+    accel = out["a"]
+    np.multiply(along, acc_t, out=accel)
     np.multiply(across, acc_n, out=tmp)
     accel += tmp
     accel /= safe
-    safe *= safe
-    safe *= speed.clip(1e-9)
-    kappa /= safe
-    kappa[~moving] = 0.0
-    np.copyto(accel, s_ddot, where=~moving)
-    x = np.sin(theta_r)
+    np.power(safe, 3, out=tmp)
+    kappa /= tmp
+    np.logical_not(moving, out=moving)
+    kappa[moving] = 0.0
+    np.copyto(accel, s_ddot, where=moving)
+
+    x = out["x"]
+    np.sin(theta_r, out=x)
     x *= d
     np.subtract(x_r, x, out=x)
-    y = np.cos(theta_r)
+    y = out["y"]
+    np.cos(theta_r, out=y)
     y *= d
     y += y_r
-    yaw = np.arctan2(across, along)
+    yaw = out["yaw"]
+    np.arctan2(across, along, out=yaw)
     yaw += theta_r
-
+    out["s"][...] = s
+    out["d"][...] = d
+    out["s_dot"][...] = s_dot
     weights = np.full(len(t), dt)  # rectangle rule over the samples
-    return Candidates(
-        t=t,
-        x=x,
-        y=y,
-        yaw=yaw,
-        v=speed,
-        a=accel,
-        kappa=kappa,
-        s=s,
-        d=d,
-        s_dot=s_dot,
-        end_speed=end_speed,
-        end_offset=end_offset,
-        horizon=horizon,
-        jerk_lon=(s_dddot**2) @ weights,
-        jerk_lat=(d_dddot**2) @ weights,
-    )
+    np.square(s_dddot, out=tmp)
+    np.matmul(tmp, weights, out=out["jerk_lon"])
+    np.square(d_dddot, out=tmp)
+    np.matmul(tmp, weights, out=out["jerk_lat"])
