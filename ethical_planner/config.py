@@ -141,6 +141,8 @@ class RiskConfig:
         gate_sigmas: distance gate of the collision probability [standard deviations].
         max_acceptable_risk: R_max; a candidate with R_ego or any R_k above it is level 3.
         boundary_harm: add the harm of hitting a wall when a candidate leaves the road.
+        delta_v_correction: path of a ``calibration.json`` written by ``etp impacts``
+            (a ``DeltaVCorrection``); None plans with the plain Eq. 1 delta-v.
     """
 
     harm_model: HarmModel = HarmModel.REDUCED_SYM
@@ -148,6 +150,7 @@ class RiskConfig:
     gate_sigmas: float = 6.0
     max_acceptable_risk: float = 0.05
     boundary_harm: bool = True
+    delta_v_correction: str | None = None
 
     def __post_init__(self) -> None:
         for name in ("harm_model", "pedestrian_model"):
@@ -158,6 +161,10 @@ class RiskConfig:
                 allowed = ", ".join(m.value for m in HarmModel)
                 raise ValueError(f"risk.{name}: unknown harm model {value!r}; allowed: {allowed}") from None
         _finite("risk", self)
+        _check(
+            self.delta_v_correction is None or isinstance(self.delta_v_correction, str),
+            "risk.delta_v_correction must be the path of a calibration JSON file or unset",
+        )
         _check(self.gate_sigmas > 0, "risk.gate_sigmas must be > 0")
         _check(
             0.0 <= self.max_acceptable_risk <= 1.0,

@@ -17,6 +17,7 @@ import numpy as np
 
 from .config import PlannerConfig
 from .cost import CostBreakdown, total_cost
+from .dv_correction import DeltaVCorrection
 from .environment import RoadEnvironment
 from .prediction import Prediction, predict_constant_turn_rate
 from .responsibility import LegalCorridors, responsibilities
@@ -206,6 +207,7 @@ class Planner:
         self.environment = environment
         self.ego_shape = ego_shape
         self.ego_mass = float(ego_mass)
+        self.dv_correction = _load_correction(config.risk.delta_v_correction)
         self.desired_speed = (
             config.desired_speed if config.desired_speed is not None else environment.speed_limit
         )
@@ -220,7 +222,8 @@ class Planner:
         config = self.config
         clock = time.perf_counter()
         risk = assess_risk(
-            candidates, prediction, self.ego_shape, self.ego_mass, self.environment, config.risk
+            candidates, prediction, self.ego_shape, self.ego_mass, self.environment, config.risk,
+            self.dv_correction,
         )
         timings["risk"] = timings.get("risk", 0.0) + _since(clock)
         clock = time.perf_counter()
@@ -396,6 +399,18 @@ class Planner:
             candidate_levels=grid.levels,
             prediction=prediction,
         )
+
+
+def _load_correction(path: str | None) -> DeltaVCorrection | None:
+    """The calibrated delta-v correction named by ``risk.delta_v_correction``, if any."""
+    if path is None:
+        return None
+    try:
+        return DeltaVCorrection.load(path)
+    except OSError as error:
+        raise ValueError(f"risk.delta_v_correction: cannot read {path}: {error.strerror}") from None
+    except ValueError as error:
+        raise ValueError(f"risk.delta_v_correction: {error}") from None
 
 
 def _since(clock: float) -> float:

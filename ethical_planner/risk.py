@@ -14,6 +14,7 @@ import shapely
 
 from .collision_probability import _parallel_for, _submit, _threads, collision_probability
 from .config import RiskConfig
+from .dv_correction import DeltaVCorrection
 from .environment import RoadEnvironment
 from .harm import HarmModel, boundary_harm, collision_harm
 from .prediction import Prediction
@@ -113,8 +114,13 @@ def assess_risk(
     ego_mass: float,
     environment: RoadEnvironment,
     config: RiskConfig,
+    dv_correction: DeltaVCorrection | None = None,
 ) -> RiskAssessment:
-    """Collision probability, harm and risk of every candidate for every road user."""
+    """Collision probability, harm and risk of every candidate for every road user.
+
+    ``dv_correction`` (from ``etp impacts``' calibration) scales the Eq. 1 delta-v of
+    both bodies towards what physical impacts produce before harm is evaluated.
+    """
     n, n_t = candidates.x.shape
     k = prediction.n_obs
     # shapely releases the GIL: on large problems the road-edge test runs on a helper
@@ -136,7 +142,7 @@ def assess_risk(
     flat = np.flatnonzero(p > 0.0)
     if flat.size:
         _harm_and_risk(
-            candidates, prediction, ego_mass, config, p, flat,
+            candidates, prediction, ego_mass, config, p, flat, ego_shape, dv_correction,
             (harm_obs, harm_ego, risk_obs, risk_ego),
         )
     peak_step = p.argmax(axis=2) if n_t else np.zeros((n, k), dtype=int)
@@ -181,6 +187,8 @@ def _harm_and_risk(
     config: RiskConfig,
     p: np.ndarray,
     flat: np.ndarray,
+    ego_shape: Shape,
+    dv_correction: DeltaVCorrection | None,
     out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 ) -> None:
     """Harm at the triples with p > 0 and the risks R = max_t p H (Eq. 3), in chunks.
@@ -192,6 +200,8 @@ def _harm_and_risk(
         config: harm models.
         p: collision probabilities, shape (n, k, t).
         flat: flat indices of the triples with p > 0, ascending, shape (m,).
+        ego_shape: the ego's footprint (used by ``dv_correction``).
+        dv_correction: optional calibrated delta-v correction.
         out: harm_obs, harm_ego (n, k, t) and risk_obs, risk_ego (n, k), zeros, written.
     """
     n_traj, k, n_t = p.shape
@@ -248,6 +258,9 @@ def _harm_and_risk(
             obs_unprotected=obs_unprotected.take(obs),
             model=model,
             pedestrian_model=pedestrian_model,
+            dv_correction=dv_correction,
+            ego_shape=(ego_shape.length, ego_shape.width),
+            obs_shape=(prediction.length.take(obs), prediction.width.take(obs)),
         )
         harm_obs.ravel()[f] = result.harm_obs
         harm_ego.ravel()[f] = result.harm_ego

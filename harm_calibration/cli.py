@@ -11,6 +11,7 @@ import sys
 from collections.abc import Sequence
 
 from ethical_planner import cli as planner_cli
+from ethical_planner.allocator import keep_freed_memory
 from mujoco_world import cli as world_cli
 
 from . import cli_impacts
@@ -33,6 +34,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``etp`` with ``argv`` (default: ``sys.argv[1:]``) and return the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    keep_freed_memory()
     try:
         return int(args.handler(args) or 0)
     except ValueError as error:

@@ -141,6 +141,9 @@ def run_task(task: RunTask, config: RunConfig | None = None) -> dict[str, Any]:
 
 
 def _run_task_in_worker(task: RunTask, config: RunConfig | None) -> dict[str, Any]:
+    from ethical_planner.allocator import keep_freed_memory
+
+    keep_freed_memory()  # a worker process is ours: numpy temporaries stay mapped
     return run_task(task, config)
 
 

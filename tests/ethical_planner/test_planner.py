@@ -126,3 +126,32 @@ def test_bad_planner_arguments():
         Planner(preset("ethical"), env, ego_mass=0.0)
     with pytest.raises(ValueError, match="config"):
         Planner({"weights": {}}, env)
+
+
+def test_calibrated_delta_v_changes_the_harm_the_planner_computes(tmp_path):
+    from ethical_planner.dv_correction import DeltaVCorrection
+
+    identity = DeltaVCorrection.identity()
+    halved = DeltaVCorrection(
+        identity.angle_edges_deg, identity.offset_edges,
+        tuple(tuple(0.5 for _ in row) for row in identity.factors),
+    )
+    path = tmp_path / "calibration.json"
+    halved.save(path)
+    situation = overtaking_cyclist(cyclist_ahead=8.0)
+    # Risk-blind and without R_max, so both plans are the same candidate.
+    base = preset("standard").with_overrides({"risk": {"max_acceptable_risk": 1.0}})
+    plain = Planner(base, situation.environment).plan(situation.ego, situation.road_users)
+    calibrated_config = base.with_overrides({"risk": {"delta_v_correction": str(path)}})
+    calibrated = Planner(calibrated_config, situation.environment).plan(situation.ego, situation.road_users)
+    assert calibrated.chosen_index == plain.chosen_index
+    cyclist_plain, cyclist_calibrated = plain.road_users[0], calibrated.road_users[0]
+    assert cyclist_plain.collision_probability == pytest.approx(cyclist_calibrated.collision_probability)
+    assert 0 < cyclist_calibrated.harm < cyclist_plain.harm  # half the delta-v, less harm
+    assert cyclist_calibrated.ego_harm < cyclist_plain.ego_harm
+
+
+def test_missing_calibration_file_is_a_clear_error(tmp_path):
+    config = preset("ethical").with_overrides({"risk": {"delta_v_correction": str(tmp_path / "nope.json")}})
+    with pytest.raises(ValueError, match="risk.delta_v_correction: cannot read"):
+        Planner(config, overtaking_cyclist().environment)
