@@ -1,6 +1,6 @@
 """Planning-cycle benchmark (same as ``etp bench``): prints a table, optionally JSON.
 
-    python benchmarks/planning_cycle.py [--repetitions 20] [--json out.json]
+python benchmarks/planning_cycle.py [--repetitions 20] [--json out.json]
 """
 
 import sys

@@ -58,8 +58,16 @@ def world_only(duration: float) -> dict[str, float]:
     t = np.arange(0.0, duration + 1.0, 0.5)
     speed = 8.0
     world.set_ego_plan(
-        TrajectoryReference(0.0, t, x + speed * t, np.full_like(t, y), np.zeros_like(t),
-                            np.full_like(t, speed), np.zeros_like(t), np.zeros_like(t))
+        TrajectoryReference(
+            0.0,
+            t,
+            x + speed * t,
+            np.full_like(t, y),
+            np.zeros_like(t),
+            np.full_like(t, speed),
+            np.zeros_like(t),
+            np.zeros_like(t),
+        )
     )
     steps = int(round(duration / world.scene.dt))
     for _ in range(steps):

@@ -53,8 +53,12 @@ def bench_scene(n_road_users: int, seed: int = 0) -> BenchScene:
     """Road users of mixed types 5-60 m ahead in three lanes (seeded)."""
     rng = np.random.default_rng(seed)
     env = RoadEnvironment.along_path(
-        [[-20.0, 0.0], [300.0, 0.0]], lanes_left=1, lanes_right=1, lane_width=LANE_WIDTH,
-        speed_limit=13.9, margin=0.5,
+        [[-20.0, 0.0], [300.0, 0.0]],
+        lanes_left=1,
+        lanes_right=1,
+        lane_width=LANE_WIDTH,
+        speed_limit=13.9,
+        margin=0.5,
     )
     ahead = np.sort(rng.uniform(5.0, 60.0, n_road_users))
     users = []
@@ -68,7 +72,8 @@ def bench_scene(n_road_users: int, seed: int = 0) -> BenchScene:
             y, yaw = lane * LANE_WIDTH, float(np.pi if lane == 1 else 0.0)
         users.append(
             RoadUser(
-                id=i + 1, type=kind,
+                id=i + 1,
+                type=kind,
                 state=KinematicState(float(x), float(y), yaw, _SPEED[kind] * rng.uniform(0.7, 1.1)),
                 shape=DEFAULT_SHAPES[kind],
             )
@@ -122,8 +127,11 @@ def peer_obstacles(grid: str, n_road_users: int) -> list[dict]:
     pred = predict_constant_turn_rate(scene.road_users, times, config.prediction)
     return [
         {
-            "mean": pred.mean[k], "cov": pred.cov[k], "heading": pred.heading[k],
-            "length": float(pred.length[k]), "width": float(pred.width[k]),
+            "mean": pred.mean[k],
+            "cov": pred.cov[k],
+            "heading": pred.heading[k],
+            "length": float(pred.length[k]),
+            "width": float(pred.width[k]),
         }
         for k in range(pred.n_obs)
     ]
@@ -145,8 +153,13 @@ def time_peer(grid: str, n_road_users: int, repetitions: int = 20) -> dict | Non
         return time_frenetix_cycle(
             np.column_stack([path.x, path.y])[::8],
             {"x": scene.ego.x, "y": scene.ego.y, "yaw": scene.ego.yaw, "v": v0, "a": 0.0},
-            sampling.n_speeds, sampling.n_offsets, sampling.d_min, sampling.d_max,
-            horizon, sampling.dt, peer_obstacles(grid, n_road_users) if n_road_users else [],
+            sampling.n_speeds,
+            sampling.n_offsets,
+            sampling.d_min,
+            sampling.d_max,
+            horizon,
+            sampling.dt,
+            peer_obstacles(grid, n_road_users) if n_road_users else [],
             repetitions,
             v_end_range=(
                 max(0.0, v0 - sampling.max_end_deceleration * horizon),
@@ -157,8 +170,12 @@ def time_peer(grid: str, n_road_users: int, repetitions: int = 20) -> dict | Non
         return None
 
 
-def run_benchmark(repetitions: int = 20, grids: tuple[str, ...] = ("225", "2025"),
-                  road_user_counts: tuple[int, ...] = (0, 5, 20), peer: bool = True) -> list[dict]:
+def run_benchmark(
+    repetitions: int = 20,
+    grids: tuple[str, ...] = ("225", "2025"),
+    road_user_counts: tuple[int, ...] = (0, 5, 20),
+    peer: bool = True,
+) -> list[dict]:
     """Time our cycle (and frenetix's, if installed) on every grid and road-user count."""
     rows = []
     for grid in grids:
@@ -181,7 +198,10 @@ def run_benchmark(repetitions: int = 20, grids: tuple[str, ...] = ("225", "2025"
 
 def format_table(rows: list[dict]) -> str:
     """Plain-text table of ``run_benchmark`` rows."""
-    header = f"{'candidates':>10} {'road users':>10} {'ours median':>12} {'ours p90':>9} {'frenetix':>9} {'frenetix/ours':>13}"
+    header = (
+        f"{'candidates':>10} {'road users':>10} {'ours median':>12} {'ours p90':>9} "
+        f"{'frenetix':>9} {'frenetix/ours':>13}"
+    )
     lines = [header, "-" * len(header)]
     for r in rows:
         peer = "n/a" if r["frenetix_median_ms"] is None else f"{r['frenetix_median_ms']:.2f}"
@@ -190,6 +210,8 @@ def format_table(rows: list[dict]) -> str:
             f"{r['n_trajectories']:>10} {r['road_users']:>10} {r['ours_median_ms']:>9.2f} ms "
             f"{r['ours_p90_ms']:>6.2f} ms {peer:>9} {ratio:>13}"
         )
-    lines.append("times in ms, medians over the repetitions; frenetix = its C++ cycle with "
-                 "CalculateCollisionProbabilityFast (no harm, principles or R_max)")
+    lines.append(
+        "times in ms, medians over the repetitions; frenetix = its C++ cycle with "
+        "CalculateCollisionProbabilityFast (no harm, principles or R_max)"
+    )
     return "\n".join(lines)

@@ -29,7 +29,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "plan",
         help="plan a few cycles of a built-in situation and print the decision records",
     )
-    plan.add_argument("--planner", default="ethical", help="ethical, selfish, standard or ethical_responsible")
+    plan.add_argument(
+        "--planner", default="ethical", help="ethical, selfish, standard or ethical_responsible"
+    )
     plan.add_argument("--cycles", type=int, default=3, help="planning cycles to run (default 3)")
     plan.add_argument("--json", action="store_true", help="print the decision records as JSON")
     plan.set_defaults(handler=_plan)
@@ -58,8 +60,8 @@ def _plan(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from .config import preset
-    from .situations import overtaking_cyclist
     from .planner import Planner
+    from .situations import overtaking_cyclist
 
     if args.cycles < 1:
         raise ValueError("--cycles must be >= 1")
@@ -75,8 +77,14 @@ def _plan(args: argparse.Namespace) -> int:
             print(decision.summary())
         # Advance open loop by one step along the plan; others keep their speed.
         traj = decision.trajectory
-        ego = replace(ego, x=float(traj.x[1]), y=float(traj.y[1]), yaw=float(traj.yaw[1]),
-                      v=float(traj.v[1]), a=float(traj.a[1]))
+        ego = replace(
+            ego,
+            x=float(traj.x[1]),
+            y=float(traj.y[1]),
+            yaw=float(traj.yaw[1]),
+            v=float(traj.v[1]),
+            a=float(traj.a[1]),
+        )
         users = [u.advanced(0.1) for u in users]
     if args.json:
         print(json.dumps(records, indent=2))

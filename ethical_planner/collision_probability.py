@@ -224,8 +224,14 @@ def collision_probability(
     det_w = w11 * w22
     obs_rows = np.concatenate(
         [
-            mean[..., 0][None], mean[..., 1][None], w11[None], w21[None], w22[None],
-            seg_x, seg_y, np.sqrt(seg_x**2 + seg_y**2),
+            mean[..., 0][None],
+            mean[..., 1][None],
+            w11[None],
+            w21[None],
+            w22[None],
+            seg_x,
+            seg_y,
+            np.sqrt(seg_x**2 + seg_y**2),
             (det_w * (olen * owid)[:, None])[None],
             (seg_x[0] * seg_x[1] + seg_y[0] * seg_y[1])[None],
             (det_w * (ego_length * ego_width))[None],
@@ -235,9 +241,9 @@ def collision_probability(
     # Ego rows, (_E_ROWS, n_traj * n_t): centre and the raw ego segments, ordered so
     # that whitening is two broadcast products (see _octagon_edges).
     ce, se = np.cos(eyaw), np.sin(eyaw)
-    ego_rows = np.stack(
-        [ex, ey, ego_length * ce, -ego_width * se, ego_length * se, ego_width * ce]
-    ).reshape(_E_ROWS, n_traj * n_t)
+    ego_rows = np.stack([ex, ey, ego_length * ce, -ego_width * se, ego_length * se, ego_width * ce]).reshape(
+        _E_ROWS, n_traj * n_t
+    )
     degenerate = min(ego_length, ego_width, float(olen.min()), float(owid.min())) <= 0.0
 
     # Edges dropped beyond gate_sigmas whitened units, the gate's own scale (_FAR_MIN).
@@ -252,9 +258,7 @@ def collision_probability(
 
     def run(job: tuple[int, int]) -> None:
         start, stop = job
-        _gate_and_integrate(
-            problem, start, stop, chunk, probability[start:stop], mean_overlap[start:stop]
-        )
+        _gate_and_integrate(problem, start, stop, chunk, probability[start:stop], mean_overlap[start:stop])
 
     # Each block writes its own rows of the outputs, so the result does not depend on
     # which thread runs which block.
@@ -410,7 +414,16 @@ def _winding(h: np.ndarray, t1: np.ndarray, t2: np.ndarray, on_line: np.ndarray)
 
 # Rows of the per-(obs, t) table built in collision_probability.
 _O_MX, _O_MY, _O_W, _O_SX, _O_SY, _O_LEN, _O_C, _O_D, _O_CEGO, _O_REACH2 = (
-    0, 1, slice(2, 5), slice(5, 7), slice(7, 9), slice(9, 11), 11, 12, 13, 14
+    0,
+    1,
+    slice(2, 5),
+    slice(5, 7),
+    slice(7, 9),
+    slice(9, 11),
+    11,
+    12,
+    13,
+    14,
 )
 _O_ROWS = 15
 _E_ROWS = 6
@@ -486,9 +499,7 @@ def _threads() -> int:
         try:
             return max(1, int(value))
         except ValueError:
-            raise ValueError(
-                f"ETHICAL_PLANNER_THREADS must be a positive integer, got {value!r}"
-            ) from None
+            raise ValueError(f"ETHICAL_PLANNER_THREADS must be a positive integer, got {value!r}") from None
     if multiprocessing.parent_process() is not None:
         return 1
     return min(2, os.cpu_count() or 1)

@@ -425,9 +425,7 @@ class HarmCoefficients:
                 raise ValueError(f"{where}: {name} must be a finite number, got {value!r}")
             object.__setattr__(self, name, float(value))
         if self.injury not in _INJURY_LEVELS:
-            raise ValueError(
-                f"{where}: injury must be one of {_INJURY_LEVELS}, got {self.injury!r}"
-            )
+            raise ValueError(f"{where}: injury must be one of {_INJURY_LEVELS}, got {self.injury!r}")
         keys = _area_keys(self.areas)
         expected = set(keys)
         if set(self.area) != expected:
@@ -479,9 +477,7 @@ def parse_harm_parameters(text: str) -> Mapping[HarmModel, HarmCoefficients]:
     except tomllib.TOMLDecodeError as error:
         raise ValueError(f"harm parameters are not valid TOML: {error}") from None
     if set(raw) != {"models"}:
-        raise ValueError(
-            f"harm parameters need exactly one top-level table 'models', got {sorted(raw)}"
-        )
+        raise ValueError(f"harm parameters need exactly one top-level table 'models', got {sorted(raw)}")
     rows = raw["models"]
     missing = sorted(m.value for m in HarmModel if m.value not in rows)
     if missing:
@@ -597,8 +593,7 @@ def harm(model: HarmModel | str, dv: ArrayLike, angle: ArrayLike | None = None) 
         return _harm_unchecked(c, dv_array, dv_array)
     if angle is None:
         raise ValueError(
-            f"harm model {c.model.value!r} distinguishes impact areas ({c.areas.value}); "
-            "pass angle [rad]"
+            f"harm model {c.model.value!r} distinguishes impact areas ({c.areas.value}); pass angle [rad]"
         )
     wrapped = wrap_angle(_finite("angle", angle, "finite angles [rad]"))
     return _harm_unchecked(c, dv_array, wrapped)
@@ -741,9 +736,7 @@ def collision_harm(
         factor = dv_correction.factor(velocity_angle(ev, ov, ego_yaw, obs_yaw), offset)
         dv_ego = dv_ego * factor
         dv_obs = dv_obs * factor
-    ego_angle, obs_angle = impact_angles(
-        ep[..., 0], ep[..., 1], ego_yaw, op[..., 0], op[..., 1], obs_yaw
-    )
+    ego_angle, obs_angle = impact_angles(ep[..., 0], ep[..., 1], ego_yaw, op[..., 0], op[..., 1], obs_yaw)
     shape = np.broadcast_shapes(dv_ego.shape, ego_angle.shape, obs_angle.shape, unprotected.shape)
 
     any_unprotected = bool(unprotected.any())

@@ -47,9 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--dv", type=float, required=True, help="delta-v of the road user whose harm is asked [m/s]"
     )
-    parser.add_argument(
-        "--area", default=None, help=f"impact area on that road user: {_ALLOWED_AREAS}"
-    )
+    parser.add_argument("--area", default=None, help=f"impact area on that road user: {_ALLOWED_AREAS}")
     parser.add_argument(
         "--model",
         default=None,
@@ -61,8 +59,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--partner",
         default=RoadUserType.CAR.value,
-        help="type of the road user whose harm is asked: "
-        + ", ".join(t.value for t in RoadUserType),
+        help="type of the road user whose harm is asked: " + ", ".join(t.value for t in RoadUserType),
     )
     parser.add_argument(
         "--ego-mass",

@@ -159,9 +159,7 @@ class FrenetixCycle:
             )
         )
         handler.add_feasability_function(
-            ff.CheckYawRateConstraint(
-                deltaMax=DELTA_MAX, wheelbase=WHEELBASE, wholeTrajectory=False
-            )
+            ff.CheckYawRateConstraint(deltaMax=DELTA_MAX, wheelbase=WHEELBASE, wholeTrajectory=False)
         )
         handler.add_feasability_function(
             ff.CheckAccelerationConstraint(
@@ -169,18 +167,14 @@ class FrenetixCycle:
             )
         )
         handler.add_feasability_function(
-            ff.CheckCurvatureConstraint(
-                deltaMax=DELTA_MAX, wheelbase=WHEELBASE, wholeTrajectory=False
-            )
+            ff.CheckCurvatureConstraint(deltaMax=DELTA_MAX, wheelbase=WHEELBASE, wholeTrajectory=False)
         )
         handler.add_feasability_function(
             ff.CheckCurvatureRateConstraint(
                 wheelbase=WHEELBASE, velocityDeltaMax=V_DELTA_MAX, wholeTrajectory=False
             )
         )
-        handler.add_cost_function(
-            cf.CalculateLateralJerkCost("lateral_jerk", _CHEAP_COSTS["lateral_jerk"])
-        )
+        handler.add_cost_function(cf.CalculateLateralJerkCost("lateral_jerk", _CHEAP_COSTS["lateral_jerk"]))
         handler.add_cost_function(
             cf.CalculateLongitudinalJerkCost("longitudinal_jerk", _CHEAP_COSTS["longitudinal_jerk"])
         )

@@ -222,20 +222,33 @@ class Planner:
         config = self.config
         clock = time.perf_counter()
         risk = assess_risk(
-            candidates, prediction, self.ego_shape, self.ego_mass, self.environment, config.risk,
+            candidates,
+            prediction,
+            self.ego_shape,
+            self.ego_mass,
+            self.environment,
+            config.risk,
             self.dv_correction,
         )
         timings["risk"] = timings.get("risk", 0.0) + _since(clock)
         clock = time.perf_counter()
         r_obs, r_ego = responsibilities(
-            candidates, risk.probability, prediction, corridors, self.ego_mass,
+            candidates,
+            risk.probability,
+            prediction,
+            corridors,
+            self.ego_mass,
             config.responsibility,
         )
         timings["responsibility"] = timings.get("responsibility", 0.0) + _since(clock)
         clock = time.perf_counter()
         invalid = physically_invalid(candidates, config.vehicle)
         levels = validity_levels(
-            invalid, risk.mean_overlap, risk.outside_road, risk.risk_obs, risk.ego_combined,
+            invalid,
+            risk.mean_overlap,
+            risk.outside_road,
+            risk.risk_obs,
+            risk.ego_combined,
             config.risk.max_acceptable_risk,
         )
         timings["validity"] = timings.get("validity", 0.0) + _since(clock)
@@ -257,10 +270,17 @@ class Planner:
             axis=1,
         )
         costs = total_cost(
-            risks, r, harms, counted, risk.ego_combined, candidates.jerk_lon, candidates.jerk_lat,
+            risks,
+            r,
+            harms,
+            counted,
+            risk.ego_combined,
+            candidates.jerk_lon,
+            candidates.jerk_lat,
             np.abs(candidates.v - self.desired_speed).mean(axis=1),
             np.abs(candidates.d).mean(axis=1),
-            levels, config.weights,
+            levels,
+            config.weights,
         )
         timings["cost"] = timings.get("cost", 0.0) + _since(clock)
         return _Evaluation(candidates, risk, r_obs, r_ego, levels, invalid, costs)
@@ -318,7 +338,9 @@ class Planner:
         emergency = False
         if best_level == Validity.PHYSICALLY_INVALID:
             brake = emergency_braking(
-                start, self.environment.reference_path, candidates.t,
+                start,
+                self.environment.reference_path,
+                candidates.t,
                 config.vehicle.emergency_deceleration,
             )
             chosen = self._evaluate(brake, prediction, corridors, timings)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import PredictionConfig
-from .road_users import MOTORISED_TYPES, RoadUser, RoadUserType, VULNERABLE_TYPES
+from .road_users import MOTORISED_TYPES, VULNERABLE_TYPES, RoadUser, RoadUserType
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -103,8 +103,15 @@ class Prediction:
         eigval = np.maximum(eigval, floor)
         cov = np.einsum("...ij,...j,...kj->...ik", eigvec, eigval, eigvec)
         return Prediction(
-            self.ids, self.types, self.mean, cov, self.heading, self.speed,
-            self.length, self.width, self.mass,
+            self.ids,
+            self.types,
+            self.mean,
+            cov,
+            self.heading,
+            self.speed,
+            self.length,
+            self.width,
+            self.mass,
         )
 
 
@@ -137,8 +144,15 @@ def predict_constant_turn_rate(
     if n_obs == 0:
         empty = np.zeros((0, n_t))
         return Prediction(
-            np.zeros(0, dtype=int), (), np.zeros((0, n_t, 2)), np.zeros((0, n_t, 2, 2)),
-            empty, empty.copy(), np.zeros(0), np.zeros(0), np.zeros(0),
+            np.zeros(0, dtype=int),
+            (),
+            np.zeros((0, n_t, 2)),
+            np.zeros((0, n_t, 2, 2)),
+            empty,
+            empty.copy(),
+            np.zeros(0),
+            np.zeros(0),
+            np.zeros(0),
         )
     ids = np.array([u.id for u in road_users])
     if len(set(ids.tolist())) != n_obs:
@@ -159,9 +173,14 @@ def predict_constant_turn_rate(
     is_ped = np.array([u.type is RoadUserType.PEDESTRIAN for u in road_users])[:, None]
     # A parked vehicle does not move: its uncertainty stays that of the observation.
     moving = np.array([u.type is not RoadUserType.PARKED_VEHICLE for u in road_users])[:, None]
-    sigma_long = config.sigma0_long + moving * np.where(
-        is_ped, config.pedestrian_growth, config.growth_long + config.growth_long_per_speed * np.abs(v0)
-    ) * t
+    sigma_long = (
+        config.sigma0_long
+        + moving
+        * np.where(
+            is_ped, config.pedestrian_growth, config.growth_long + config.growth_long_per_speed * np.abs(v0)
+        )
+        * t
+    )
     sigma_lat = config.sigma0_lat + moving * np.where(is_ped, config.pedestrian_growth, config.growth_lat) * t
     cov = _rotated_covariance(sigma_long, sigma_lat, heading)
     prediction = Prediction(

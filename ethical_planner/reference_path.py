@@ -57,9 +57,7 @@ class ReferencePath:
         """
         pts = np.asarray(points, dtype=float)
         if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 2:
-            raise ValueError(
-                f"reference path points must have shape (n, 2) with n >= 2, got {pts.shape}"
-            )
+            raise ValueError(f"reference path points must have shape (n, 2) with n >= 2, got {pts.shape}")
         if not np.all(np.isfinite(pts)):
             raise ValueError("reference path points must be finite numbers")
         chord = np.hypot(*np.diff(pts, axis=0).T)

@@ -83,9 +83,7 @@ class LegalCorridors:
             v0=arr([abs(u.state.v) for u in users]),
             speed_limit=arr([c.speed_limit for c in corridors]),
             lateral_half_width=arr([c.lateral_half_width for c in corridors]),
-            stop_distance=arr(
-                [np.inf if c.stop_distance is None else c.stop_distance for c in corridors]
-            ),
+            stop_distance=arr([np.inf if c.stop_distance is None else c.stop_distance for c in corridors]),
             max_acceleration=arr([c.max_acceleration for c in corridors]),
             max_deceleration=arr([c.max_deceleration for c in corridors]),
         )
@@ -112,9 +110,7 @@ class LegalCorridors:
         return lowest, np.minimum(highest, self.stop_distance)
 
 
-def base_responsibility(
-    mass: np.ndarray, motorised: np.ndarray, config: ResponsibilityConfig
-) -> np.ndarray:
+def base_responsibility(mass: np.ndarray, motorised: np.ndarray, config: ResponsibilityConfig) -> np.ndarray:
     """r_base = base_max (1 - exp(-m / scale)) for motorised road users, else 0."""
     base = config.base_max * (1.0 - np.exp(-np.asarray(mass) / config.base_mass_scale))
     return np.where(motorised, base, 0.0)
@@ -143,9 +139,7 @@ def responsibilities(
         it runs, and of the ego for the risk it runs in a collision with k.
     """
     n, k, _ = probability.shape
-    base_obs = np.broadcast_to(
-        base_responsibility(prediction.mass, prediction.motorised, config), (n, k)
-    )
+    base_obs = np.broadcast_to(base_responsibility(prediction.mass, prediction.motorised, config), (n, k))
     base_ego = np.full((n, k), float(base_responsibility(np.array(ego_mass), np.array(True), config)))
     r_obs, r_ego = base_obs, base_ego
     if k == 0:

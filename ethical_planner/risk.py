@@ -85,9 +85,7 @@ def _eroded_area(area: shapely.Geometry, radius: float) -> shapely.Geometry:
     return cached[1]
 
 
-def outside_drivable_area(
-    candidates: Candidates, shape: Shape, environment: RoadEnvironment
-) -> np.ndarray:
+def outside_drivable_area(candidates: Candidates, shape: Shape, environment: RoadEnvironment) -> np.ndarray:
     """True where a corner of the ego footprint lies outside the drivable area, shape (n, t).
 
     A centre inside the area shrunk by the footprint's half-diagonal has all corners
@@ -100,8 +98,11 @@ def outside_drivable_area(
     edge = np.flatnonzero(~deep)
     if edge.size:
         cx, cy = footprint_corners(
-            candidates.x.ravel()[edge], candidates.y.ravel()[edge], candidates.yaw.ravel()[edge],
-            shape.length, shape.width,
+            candidates.x.ravel()[edge],
+            candidates.y.ravel()[edge],
+            candidates.yaw.ravel()[edge],
+            shape.length,
+            shape.width,
         )
         outside.ravel()[edge] = ~np.all(shapely.contains_xy(area, cx, cy), axis=-1)
     return outside
@@ -129,9 +130,17 @@ def assess_risk(
     if k and n * n_t >= _OVERLAP_MIN_POSES:
         outside_job = _submit(lambda: outside_drivable_area(candidates, ego_shape, environment))
     cp = collision_probability(
-        candidates.x, candidates.y, candidates.yaw, ego_shape.length, ego_shape.width,
-        prediction.mean, prediction.cov, prediction.heading, prediction.length,
-        prediction.width, gate_sigmas=config.gate_sigmas,
+        candidates.x,
+        candidates.y,
+        candidates.yaw,
+        ego_shape.length,
+        ego_shape.width,
+        prediction.mean,
+        prediction.cov,
+        prediction.heading,
+        prediction.length,
+        prediction.width,
+        gate_sigmas=config.gate_sigmas,
     )
     p = cp.probability
     harm_obs = np.zeros((n, k, n_t))
@@ -142,7 +151,14 @@ def assess_risk(
     flat = np.flatnonzero(p > 0.0)
     if flat.size:
         _harm_and_risk(
-            candidates, prediction, ego_mass, config, p, flat, ego_shape, dv_correction,
+            candidates,
+            prediction,
+            ego_mass,
+            config,
+            p,
+            flat,
+            ego_shape,
+            dv_correction,
             (harm_obs, harm_ego, risk_obs, risk_ego),
         )
     peak_step = p.argmax(axis=2) if n_t else np.zeros((n, k), dtype=int)
@@ -211,16 +227,22 @@ def _harm_and_risk(
     ego_yaw = candidates.yaw.ravel()
     ego_table = np.stack(
         [
-            candidates.x.ravel(), candidates.y.ravel(), ego_yaw,
-            candidates.v.ravel() * np.cos(ego_yaw), candidates.v.ravel() * np.sin(ego_yaw),
+            candidates.x.ravel(),
+            candidates.y.ravel(),
+            ego_yaw,
+            candidates.v.ravel() * np.cos(ego_yaw),
+            candidates.v.ravel() * np.sin(ego_yaw),
         ]
     )
     obs_yaw = prediction.heading.ravel()
     obs_speed = prediction.speed.ravel()
     obs_table = np.stack(
         [
-            prediction.mean[..., 0].ravel(), prediction.mean[..., 1].ravel(), obs_yaw,
-            obs_speed * np.cos(obs_yaw), obs_speed * np.sin(obs_yaw),
+            prediction.mean[..., 0].ravel(),
+            prediction.mean[..., 1].ravel(),
+            obs_yaw,
+            obs_speed * np.cos(obs_yaw),
+            obs_speed * np.sin(obs_yaw),
         ]
     )
     obs_mass = prediction.mass

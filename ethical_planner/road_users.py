@@ -34,15 +34,11 @@ class RoadUserType(StrEnum):
             return cls(value)
         except ValueError:
             allowed = ", ".join(t.value for t in cls)
-            raise ValueError(
-                f"unknown road-user type {value!r}; allowed: {allowed}"
-            ) from None
+            raise ValueError(f"unknown road-user type {value!r}; allowed: {allowed}") from None
 
 
 #: Road users without a crash structure around them (paper: unprotected).
-UNPROTECTED_TYPES = frozenset(
-    {RoadUserType.PEDESTRIAN, RoadUserType.BICYCLE, RoadUserType.MOTORCYCLE}
-)
+UNPROTECTED_TYPES = frozenset({RoadUserType.PEDESTRIAN, RoadUserType.BICYCLE, RoadUserType.MOTORCYCLE})
 #: Vulnerable road users, the third group of the paper's Figs. 5 and 6.
 VULNERABLE_TYPES = UNPROTECTED_TYPES
 #: Road users with an engine; they carry a base responsibility growing with mass.
@@ -99,9 +95,7 @@ class Shape:
     def __post_init__(self) -> None:
         _require_finite("Shape", length=self.length, width=self.width)
         if self.length <= 0 or self.width <= 0:
-            raise ValueError(
-                f"Shape.length and Shape.width must be > 0 m, got {self.length} x {self.width}"
-            )
+            raise ValueError(f"Shape.length and Shape.width must be > 0 m, got {self.length} x {self.width}")
 
 
 #: Default shapes [m] used when a scenario gives only a type.
@@ -194,9 +188,7 @@ class LegalCorridor:
         if self.speed_limit < 0 or self.lateral_half_width < 0:
             raise ValueError("LegalCorridor.speed_limit and lateral_half_width must be >= 0")
         if self.max_acceleration < 0 or self.max_deceleration <= 0:
-            raise ValueError(
-                "LegalCorridor.max_acceleration must be >= 0 and max_deceleration > 0 m/s^2"
-            )
+            raise ValueError("LegalCorridor.max_acceleration must be >= 0 and max_deceleration > 0 m/s^2")
         if self.stop_distance is not None:
             _require_finite("LegalCorridor", stop_distance=self.stop_distance)
 
@@ -225,9 +217,7 @@ class RoadUser:
     def __post_init__(self) -> None:
         object.__setattr__(self, "type", RoadUserType.parse(self.type))
         if math.isnan(self.mass):
-            object.__setattr__(
-                self, "mass", mass_of(self.type, self.shape.length, self.shape.width)
-            )
+            object.__setattr__(self, "mass", mass_of(self.type, self.shape.length, self.shape.width))
         _require_finite("RoadUser", mass=self.mass)
         if self.mass <= 0:
             raise ValueError(f"RoadUser.mass must be > 0 kg, got {self.mass}")

@@ -41,9 +41,7 @@ def frenet_state(state: KinematicState, path: ReferencePath) -> FrenetState:
     delta = state.yaw - float(theta)
     one_minus_kd = 1.0 - float(kappa) * d
     if one_minus_kd <= 0.05:
-        raise ValueError(
-            f"ego lies {d:.1f} m from the reference path, beyond its radius of curvature"
-        )
+        raise ValueError(f"ego lies {d:.1f} m from the reference path, beyond its radius of curvature")
     return FrenetState(
         s=s,
         s_dot=state.v * np.cos(delta) / one_minus_kd,
@@ -110,9 +108,7 @@ def quartic_coefficients(
     delta = v_end - v0 - a0 * horizon
     c4 = -(delta + 0.5 * a0 * horizon) / (2.0 * horizon**3)
     c3 = (-a0 - 12.0 * c4 * horizon**2) / (6.0 * horizon)
-    return np.stack(
-        [np.full_like(c4, s0), np.full_like(c4, v0), np.full_like(c4, 0.5 * a0), c3, c4], axis=-1
-    )
+    return np.stack([np.full_like(c4, s0), np.full_like(c4, v0), np.full_like(c4, 0.5 * a0), c3, c4], axis=-1)
 
 
 def quintic_coefficients(
@@ -244,17 +240,20 @@ def emergency_braking(
     moving = t < t_stop
     s = start.s + np.where(moving, v0 * t - 0.5 * deceleration * t**2, 0.5 * v0 * t_stop)
     lon = np.stack(
-        [s, np.where(moving, v0 - deceleration * t, 0.0), np.where(moving, -deceleration, 0.0),
-         np.zeros_like(t)]
+        [
+            s,
+            np.where(moving, v0 - deceleration * t, 0.0),
+            np.where(moving, -deceleration, 0.0),
+            np.zeros_like(t),
+        ]
     )[:, None, :]
     settle = np.array([min(1.0, float(t[-1])) if t[-1] > 0 else 1.0])
     lat = _polynomial_derivatives(
         quintic_coefficients(start.d, start.d_dot, start.d_ddot, np.array([start.d]), settle),
-        t, settle,
+        t,
+        settle,
     )
-    return frenet_to_candidates(
-        t, lon, lat, path, np.array([0.0]), np.array([start.d]), np.array([t_stop])
-    )
+    return frenet_to_candidates(t, lon, lat, path, np.array([0.0]), np.array([start.d]), np.array([t_stop]))
 
 
 def frenet_to_candidates(
@@ -289,9 +288,7 @@ _STATE_NAMES = ("x", "y", "yaw", "v", "a", "kappa", "s", "d", "s_dot", "jerk_lon
 
 def _empty_states(n: int, n_t: int) -> dict[str, np.ndarray]:
     """Uninitialised per-step (n, n_t) and per-candidate (n,) output arrays by name."""
-    return {
-        name: np.empty(n if name.startswith("jerk") else (n, n_t)) for name in _STATE_NAMES
-    }
+    return {name: np.empty(n if name.startswith("jerk") else (n, n_t)) for name in _STATE_NAMES}
 
 
 def _candidates(

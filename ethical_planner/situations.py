@@ -40,12 +40,14 @@ def overtaking_cyclist(
         [[-30.0, 0.0], [400.0, 0.0]], lanes_left=1, lanes_right=0, speed_limit=13.9, margin=0.3
     )
     cyclist = RoadUser(
-        id=1, type=RoadUserType.BICYCLE,
+        id=1,
+        type=RoadUserType.BICYCLE,
         state=KinematicState(cyclist_ahead, -0.7, 0.0, 4.0),
         shape=DEFAULT_SHAPES[RoadUserType.BICYCLE],
     )
     oncoming = RoadUser(
-        id=2, type=RoadUserType.CAR,
+        id=2,
+        type=RoadUserType.CAR,
         state=KinematicState(oncoming_distance, 3.5, math.pi, 12.0),
         shape=DEFAULT_SHAPES[RoadUserType.CAR],
     )
@@ -64,12 +66,18 @@ def oncoming_in_ego_lane_with_pedestrian(ego_speed: float = 14.0) -> Situation:
         [[-30.0, 0.0], [300.0, 0.0]], lanes_left=1, lanes_right=0, speed_limit=13.9, margin=3.0
     )
     users = (
-        RoadUser(1, RoadUserType.PEDESTRIAN, KinematicState(16.0, -3.0, 0.0, 1.0),
-                 DEFAULT_SHAPES[RoadUserType.PEDESTRIAN]),
-        RoadUser(2, RoadUserType.CAR, KinematicState(25.0, 3.5, math.pi, 12.0),
-                 DEFAULT_SHAPES[RoadUserType.CAR]),
-        RoadUser(3, RoadUserType.CAR, KinematicState(30.0, 0.0, math.pi, 12.0),
-                 DEFAULT_SHAPES[RoadUserType.CAR]),
+        RoadUser(
+            1,
+            RoadUserType.PEDESTRIAN,
+            KinematicState(16.0, -3.0, 0.0, 1.0),
+            DEFAULT_SHAPES[RoadUserType.PEDESTRIAN],
+        ),
+        RoadUser(
+            2, RoadUserType.CAR, KinematicState(25.0, 3.5, math.pi, 12.0), DEFAULT_SHAPES[RoadUserType.CAR]
+        ),
+        RoadUser(
+            3, RoadUserType.CAR, KinematicState(30.0, 0.0, math.pi, 12.0), DEFAULT_SHAPES[RoadUserType.CAR]
+        ),
     )
     return Situation(
         "oncoming_in_ego_lane_with_pedestrian", env, KinematicState(0.0, 0.0, 0.0, ego_speed), users

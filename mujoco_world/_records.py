@@ -66,9 +66,7 @@ def knots(owner: str, name: str, value: Any) -> tuple[tuple[float, float], ...]:
     try:
         pairs = tuple((float(t), float(v)) for t, v in value)
     except (TypeError, ValueError):
-        raise ValueError(
-            f"{owner}.{name} must be a list of [time, value] pairs, got {value!r}"
-        ) from None
+        raise ValueError(f"{owner}.{name} must be a list of [time, value] pairs, got {value!r}") from None
     for t, v in pairs:
         if not (math.isfinite(t) and math.isfinite(v)):
             raise ValueError(f"{owner}.{name} must hold finite numbers, got {value!r}")
@@ -109,9 +107,7 @@ def from_mapping(cls: type[T], data: Any, path: str = "") -> T:
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
     unknown = sorted(set(data) - set(fields))
     if unknown:
-        raise ValueError(
-            f"{where}: unknown key {unknown[0]!r}; allowed: {', '.join(sorted(fields))}"
-        )
+        raise ValueError(f"{where}: unknown key {unknown[0]!r}; allowed: {', '.join(sorted(fields))}")
     kwargs: dict[str, Any] = {}
     for name, value in data.items():
         kwargs[name] = _convert(hints[name], value, f"{path}.{name}" if path else name)
@@ -135,7 +131,7 @@ def _prefixed(path: str, message: str) -> str:
     base = re.sub(r"\[\d+\]$", "", leaf)
     for name in (base, base.rstrip("s")):
         if message.startswith(name + "."):
-            return f"{path}.{message[len(name) + 1:]}"
+            return f"{path}.{message[len(name) + 1 :]}"
     return f"{path}: {message}"
 
 

@@ -157,7 +157,10 @@ def make_tasks(
 ) -> list[RunTask]:
     """All combinations, scenario-major; ``record``/``keep`` as in ``recording_observer``."""
     return [
-        RunTask(s, p, int(seed), str(out), record, keep) for s in scenarios for seed in seeds for p in planners
+        RunTask(s, p, int(seed), str(out), record, keep)
+        for s in scenarios
+        for seed in seeds
+        for p in planners
     ]
 
 

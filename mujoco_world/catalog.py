@@ -79,14 +79,20 @@ def overtake_cyclist(rng: np.random.Generator | None = None) -> Scenario:
     draw = _Draw(rng)
     ego_speed = draw(13.0, 9.0, 15.0)
     cyclist = _user(
-        "cyclist", "bicycle", RouteSpec(lane=0, offset=-1.0), draw(50.0, 35.0, 70.0),
+        "cyclist",
+        "bicycle",
+        RouteSpec(lane=0, offset=-1.0),
+        draw(50.0, 35.0, 70.0),
         _scripted(draw(5.0, 3.5, 7.0)),
         legal=LegalSpec(speed_limit=8.0, lateral_half_width=0.6),
     )
     oncoming = [
         _user(
-            f"oncoming_{k}", draw.choice("car", ["car", "car", "truck", "bus"]) if k else "car",
-            RouteSpec(lane=0, direction=-1), s0, _idm(draw(13.0, 10.0, 15.0)),
+            f"oncoming_{k}",
+            draw.choice("car", ["car", "car", "truck", "bus"]) if k else "car",
+            RouteSpec(lane=0, direction=-1),
+            s0,
+            _idm(draw(13.0, 10.0, 15.0)),
         )
         for k, s0 in enumerate((draw(150.0, 110.0, 190.0), draw(70.0, 30.0, 80.0)))
     ]
@@ -110,21 +116,31 @@ def pedestrian_behind_parked(rng: np.random.Generator | None = None) -> Scenario
     ped_x = parked_x + draw(3.2, 2.8, 4.0)
     start_y = kerb_y + 1.0  # hidden in the parking strip, in front of the van
     ped = _user(
-        "pedestrian", "pedestrian",
-        RouteSpec(road="waypoints", waypoints=((ped_x, start_y), (ped_x, 9.0))), 0.0,
+        "pedestrian",
+        "pedestrian",
+        RouteSpec(road="waypoints", waypoints=((ped_x, start_y), (ped_x, 9.0))),
+        0.0,
         _scripted(
-            0.0, trigger_distance=draw(21.0, 17.0, 26.0),
+            0.0,
+            trigger_distance=draw(21.0, 17.0, 26.0),
             speed_profile=((0.0, 0.0), (0.6, draw(2.2, 1.6, 2.8))),
         ),
         legal=LegalSpec(speed_limit=2.5, lateral_half_width=0.5, stop_line=0.3),
     )
     van = _user(
-        "parked_van", "parked_vehicle",
+        "parked_van",
+        "parked_vehicle",
         RouteSpec(lane=0, offset=-(0.5 * road.lane_width + 0.5 * road.parking_width)),
-        parked_x, _parked(), length=5.5, width=2.1,
+        parked_x,
+        _parked(),
+        length=5.5,
+        width=2.1,
     )
     oncoming = _user(
-        "oncoming", "car", RouteSpec(lane=0, direction=-1), draw(110.0, 80.0, 150.0),
+        "oncoming",
+        "car",
+        RouteSpec(lane=0, direction=-1),
+        draw(110.0, 80.0, 150.0),
         _idm(draw(12.0, 9.0, 13.9)),
     )
     return Scenario(
@@ -143,18 +159,19 @@ def highway_cut_in(rng: np.random.Generator | None = None) -> Scenario:
     draw = _Draw(rng)
     ego_speed = draw(25.0, 22.0, 28.0)
     cutter = _user(
-        "cutter", draw.choice("car", ["car", "car", "truck"]), RouteSpec(lane=0),
+        "cutter",
+        draw.choice("car", ["car", "car", "truck"]),
+        RouteSpec(lane=0),
         draw(30.0, 25.0, 40.0),
         _scripted(
-            draw(22.0, 18.0, 24.0), trigger_distance=draw(24.0, 18.0, 30.0),
+            draw(22.0, 18.0, 24.0),
+            trigger_distance=draw(24.0, 18.0, 30.0),
             lateral=((draw(1.8, 1.2, 2.5), 3.5),),
         ),
         legal=LegalSpec(lateral_half_width=0.6),
     )
     ahead = _user("ahead", "car", RouteSpec(lane=1), draw(100.0, 80.0, 130.0), _idm(draw(25.0, 22.0, 27.0)))
-    left = _user(
-        "left_lane", "car", RouteSpec(lane=2), draw(18.0, 5.0, 30.0), _idm(draw(27.0, 25.0, 30.0))
-    )
+    left = _user("left_lane", "car", RouteSpec(lane=2), draw(18.0, 5.0, 30.0), _idm(draw(27.0, 25.0, 30.0)))
     slow_right = _user(
         "slow_right", "truck", RouteSpec(lane=0), draw(110.0, 90.0, 140.0), _idm(draw(22.0, 20.0, 23.0))
     )
@@ -173,20 +190,29 @@ def tailgater_sudden_stop(rng: np.random.Generator | None = None) -> Scenario:
     draw = _Draw(rng)
     speed = draw(15.0, 12.0, 16.7)
     lead = _user(
-        "lead", "car", RouteSpec(lane=0), 20.0 + draw(24.0, 20.0, 30.0),
+        "lead",
+        "car",
+        RouteSpec(lane=0),
+        20.0 + draw(24.0, 20.0, 30.0),
         _scripted(
-            speed, start_time=draw(2.5, 1.5, 4.0),
+            speed,
+            start_time=draw(2.5, 1.5, 4.0),
             speed_profile=((0.0, speed), (speed / draw(7.5, 6.0, 9.0), 0.0)),
         ),
     )
     tailgater = _user(
-        "tailgater", draw.choice("car", ["car", "car", "truck"]), RouteSpec(lane=0),
+        "tailgater",
+        draw.choice("car", ["car", "car", "truck"]),
+        RouteSpec(lane=0),
         20.0 - draw(10.5, 9.5, 12.0),
         _idm(speed, time_headway=0.4, min_gap=1.5, reaction_time=draw(0.9, 0.7, 1.2), max_deceleration=7.0),
         legal=LegalSpec(lateral_half_width=0.5),
     )
     oncoming = _user(
-        "oncoming", "car", RouteSpec(lane=0, direction=-1), draw(140.0, 110.0, 170.0),
+        "oncoming",
+        "car",
+        RouteSpec(lane=0, direction=-1),
+        draw(140.0, 110.0, 170.0),
         _idm(draw(14.0, 11.0, 16.0)),
     )
     return Scenario(
@@ -207,12 +233,18 @@ def red_light_runner(rng: np.random.Generator | None = None) -> Scenario:
     stop_line = half - road.half_width - road.shoulder - 2.0
     runner_speed = draw(15.0, 12.0, 17.0)
     runner = _user(
-        "runner", draw.choice("car", ["car", "car", "motorcycle", "truck"]), RouteSpec(road="cross", lane=0),
-        draw(8.0, 0.0, 20.0), _scripted(runner_speed),
+        "runner",
+        draw.choice("car", ["car", "car", "motorcycle", "truck"]),
+        RouteSpec(road="cross", lane=0),
+        draw(8.0, 0.0, 20.0),
+        _scripted(runner_speed),
         legal=LegalSpec(lateral_half_width=0.5, stop_line=stop_line),
     )
     obeying = _user(
-        "obeying", "car", RouteSpec(road="cross", lane=0, direction=-1), draw(40.0, 25.0, 50.0),
+        "obeying",
+        "car",
+        RouteSpec(road="cross", lane=0, direction=-1),
+        draw(40.0, 25.0, 50.0),
         _idm(draw(11.0, 9.0, 13.0), stop_at=stop_line),
         legal=LegalSpec(lateral_half_width=0.5, stop_line=stop_line),
     )
@@ -232,21 +264,26 @@ def turning_truck_cyclist(rng: np.random.Generator | None = None) -> Scenario:
     draw = _Draw(rng)
     road = RoadSpec(kind="intersection", length=160.0, speed_limit=13.9, parking_width=1.5)
     truck = _user(
-        "truck", "truck", RouteSpec(lane=0, turn="right"), draw(40.0, 35.0, 45.0),
+        "truck",
+        "truck",
+        RouteSpec(lane=0, turn="right"),
+        draw(40.0, 35.0, 45.0),
         _scripted(8.0, speed_profile=((0.0, 8.0), (4.0, 4.0), (9.0, 4.0), (12.0, 8.0))),
     )
     bike_lane = -(0.5 * road.lane_width + 0.5 * road.parking_width)
     cyclist = _user(
-        "cyclist", "bicycle", RouteSpec(lane=0, offset=bike_lane), draw(38.0, 30.0, 46.0),
+        "cyclist",
+        "bicycle",
+        RouteSpec(lane=0, offset=bike_lane),
+        draw(38.0, 30.0, 46.0),
         _scripted(
-            draw(5.0, 4.0, 6.0), start_time=draw(4.5, 3.5, 6.0),
+            draw(5.0, 4.0, 6.0),
+            start_time=draw(4.5, 3.5, 6.0),
             lateral=((1.0, draw(2.2, 1.6, 2.8)),),
         ),
         legal=LegalSpec(speed_limit=8.0, lateral_half_width=0.6),
     )
-    oncoming = _user(
-        "oncoming", "car", RouteSpec(lane=0, direction=-1), draw(60.0, 30.0, 90.0), _idm(12.0)
-    )
+    oncoming = _user("oncoming", "car", RouteSpec(lane=0, direction=-1), draw(60.0, 30.0, 90.0), _idm(12.0))
     return Scenario(
         name="turning_truck_cyclist",
         description="a right-turning truck cuts across a cyclist, who swerves out into the ego lane",
@@ -261,16 +298,22 @@ def oncoming_drift(rng: np.random.Generator | None = None) -> Scenario:
     """An oncoming car drifts into the ego lane; a cyclist rides on the right edge."""
     draw = _Draw(rng)
     drifter = _user(
-        "drifter", draw.choice("car", ["car", "car", "truck", "bus"]), RouteSpec(lane=0, direction=-1),
+        "drifter",
+        draw.choice("car", ["car", "car", "truck", "bus"]),
+        RouteSpec(lane=0, direction=-1),
         draw(100.0, 80.0, 120.0),
         _scripted(
-            draw(18.0, 14.0, 20.0), trigger_distance=draw(70.0, 55.0, 85.0),
+            draw(18.0, 14.0, 20.0),
+            trigger_distance=draw(70.0, 55.0, 85.0),
             lateral=((draw(2.5, 1.5, 3.0), draw(3.2, 2.5, 3.8)),),
         ),
         legal=LegalSpec(lateral_half_width=0.5),
     )
     cyclist = _user(
-        "cyclist", "bicycle", RouteSpec(lane=0, offset=-1.2), draw(60.0, 45.0, 75.0),
+        "cyclist",
+        "bicycle",
+        RouteSpec(lane=0, offset=-1.2),
+        draw(60.0, 45.0, 75.0),
         _scripted(draw(5.0, 4.0, 6.0)),
         legal=LegalSpec(speed_limit=8.0, lateral_half_width=0.6),
     )
@@ -288,21 +331,33 @@ def curve_truck(rng: np.random.Generator | None = None) -> Scenario:
     """On a curve between walls an oncoming truck cuts the corner into the ego lane."""
     draw = _Draw(rng)
     road = RoadSpec(
-        kind="curved", length=260.0, radius=draw(70.0, 55.0, 90.0), curve_angle=draw(-80.0, -100.0, -60.0),
-        lead_in=60.0, speed_limit=16.7, boundary="wall",
+        kind="curved",
+        length=260.0,
+        radius=draw(70.0, 55.0, 90.0),
+        curve_angle=draw(-80.0, -100.0, -60.0),
+        lead_in=60.0,
+        speed_limit=16.7,
+        boundary="wall",
     )
     truck = _user(
-        "truck", draw.choice("truck", ["truck", "bus"]), RouteSpec(lane=0, direction=-1),
+        "truck",
+        draw.choice("truck", ["truck", "bus"]),
+        RouteSpec(lane=0, direction=-1),
         draw(95.0, 80.0, 110.0),
         _scripted(
-            draw(12.0, 10.0, 14.0), trigger_distance=draw(65.0, 50.0, 80.0),
+            draw(12.0, 10.0, 14.0),
+            trigger_distance=draw(65.0, 50.0, 80.0),
             lateral=((draw(2.5, 2.0, 3.5), draw(1.6, 1.0, 2.2)),),
         ),
         legal=LegalSpec(lateral_half_width=0.4),
     )
     pedestrian = _user(
-        "walker", "pedestrian", RouteSpec(lane=0, offset=-1.9), draw(75.0, 60.0, 90.0),
-        _scripted(1.3), legal=LegalSpec(speed_limit=2.5, lateral_half_width=0.5),
+        "walker",
+        "pedestrian",
+        RouteSpec(lane=0, offset=-1.9),
+        draw(75.0, 60.0, 90.0),
+        _scripted(1.3),
+        legal=LegalSpec(speed_limit=2.5, lateral_half_width=0.5),
     )
     return Scenario(
         name="curve_truck",
@@ -325,7 +380,10 @@ def dense_urban(rng: np.random.Generator | None = None) -> Scenario:
     for k, s0 in enumerate((35.0, 110.0)):
         users.append(
             _user(
-                f"car_{k}", "car", RouteSpec(lane=0), s0 + draw(0.0, -5.0, 5.0),
+                f"car_{k}",
+                "car",
+                RouteSpec(lane=0),
+                s0 + draw(0.0, -5.0, 5.0),
                 _idm(draw(11.0, 9.0, 13.9)),
             )
         )
@@ -337,7 +395,10 @@ def dense_urban(rng: np.random.Generator | None = None) -> Scenario:
         kind = draw.choice("car", ["car", "car", "car", "truck", "motorcycle"])
         users.append(
             _user(
-                f"oncoming_{k}", kind, RouteSpec(lane=0, direction=-1), s0 + draw(0.0, -6.0, 6.0),
+                f"oncoming_{k}",
+                kind,
+                RouteSpec(lane=0, direction=-1),
+                s0 + draw(0.0, -6.0, 6.0),
                 _idm(draw(12.0, 9.0, 13.9)),
             )
         )
@@ -346,8 +407,12 @@ def dense_urban(rng: np.random.Generator | None = None) -> Scenario:
     for k, s0 in enumerate((150.0, 205.0)):
         users.append(
             _user(
-                f"cyclist_{k}", "bicycle", RouteSpec(lane=0, offset=-1.1), s0 + draw(0.0, -10.0, 10.0),
-                _scripted(draw(5.0, 4.0, 6.5)), legal=LegalSpec(speed_limit=8.0, lateral_half_width=0.6),
+                f"cyclist_{k}",
+                "bicycle",
+                RouteSpec(lane=0, offset=-1.1),
+                s0 + draw(0.0, -10.0, 10.0),
+                _scripted(draw(5.0, 4.0, 6.5)),
+                legal=LegalSpec(speed_limit=8.0, lateral_half_width=0.6),
             )
         )
     for k, (x, side) in enumerate(((130.0, -1), (160.0, 1), (210.0, -1), (262.0, 1))):
@@ -356,10 +421,13 @@ def dense_urban(rng: np.random.Generator | None = None) -> Scenario:
         y1 = kerb_l + 2.0 if side < 0 else -(kerb_r + 2.0)
         users.append(
             _user(
-                f"pedestrian_{k}", "pedestrian",
-                RouteSpec(road="waypoints", waypoints=((x, y0), (x, y1))), 0.0,
+                f"pedestrian_{k}",
+                "pedestrian",
+                RouteSpec(road="waypoints", waypoints=((x, y0), (x, y1))),
+                0.0,
                 BehaviourSpec(
-                    kind="pedestrian", speed=draw(1.4, 1.0, 1.8),
+                    kind="pedestrian",
+                    speed=draw(1.4, 1.0, 1.8),
                     crossing=CrossingSpec(wait_at=1.4, gap_time=draw(4.0, 2.5, 5.0)),
                 ),
                 legal=LegalSpec(speed_limit=2.5, lateral_half_width=0.5),
@@ -439,9 +507,7 @@ def random_scenario(family: str, rng: np.random.Generator, name: str | None = No
     return scenario if name is None else dataclasses.replace(scenario, name=name)
 
 
-def generate_scenarios(
-    n: int, seed: int, families: Sequence[str] | None = None
-) -> Iterator[Scenario]:
+def generate_scenarios(n: int, seed: int, families: Sequence[str] | None = None) -> Iterator[Scenario]:
     """Yield ``n`` random scenarios, cycling through ``families`` (default: all).
 
     Scenario i is drawn from its own generator ``default_rng([seed, i])``, so any one
@@ -501,5 +567,3 @@ __all__ = [
     "random_scenario",
     "scenario_by_name",
 ]
-
-

@@ -48,7 +48,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--planners", default="ethical,selfish,standard", help="comma-separated presets")
     p.add_argument("--seeds", default="0", help="comma-separated run seeds (default 0)")
     p.add_argument(
-        "--random", type=int, default=0, metavar="N",
+        "--random",
+        type=int,
+        default=0,
+        metavar="N",
         help="instead of the catalog, run N random variants of the families (see --scenario-seed)",
     )
     p.add_argument("--scenario-seed", type=int, default=0, help="seed of the random variants (default 0)")
@@ -65,7 +68,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _recording_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-record", action="store_true", help="write no Rerun recording (still indexed)")
     parser.add_argument(
-        "--keep-recordings", choices=["all", "near-crash"], default="all",
+        "--keep-recordings",
+        choices=["all", "near-crash"],
+        default="all",
         help="keep every recording, or only those of near-crash runs (the index lists every run)",
     )
 

@@ -166,9 +166,24 @@ class _Episode:
     """Accumulators of one open contact episode."""
 
     __slots__ = (
-        "a", "b", "t_start", "t_last", "pre_qpos_a", "pre_qvel_a", "pre_qpos_b",
-        "pre_qvel_b", "post_qvel_a", "post_qvel_b", "impulse_b", "point_sum_a",
-        "point_sum_b", "weight", "peak", "penetration", "multi_body", "ended_in_contact",
+        "a",
+        "b",
+        "t_start",
+        "t_last",
+        "pre_qpos_a",
+        "pre_qvel_a",
+        "pre_qpos_b",
+        "pre_qvel_b",
+        "post_qvel_a",
+        "post_qvel_b",
+        "impulse_b",
+        "point_sum_a",
+        "point_sum_b",
+        "weight",
+        "peak",
+        "penetration",
+        "multi_body",
+        "ended_in_contact",
     )
 
     def __init__(self, a: int, b: int, t: float, prev_qpos: np.ndarray, prev_qvel: np.ndarray):

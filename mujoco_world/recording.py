@@ -59,6 +59,7 @@ def _load_rerun() -> None:
     import rerun as rr
     import rerun.blueprint as rrb
 
+
 #: File name of a run's recording inside its output folder.
 RECORDING_FILE = "recording.rrd"
 #: RGB colour per road-user type.
@@ -263,8 +264,9 @@ class RerunRecorder(RunObserver):
         traj = decision.trajectory
         rec.log(
             "world/plan/chosen",
-            rr.LineStrips3D([_to3(np.column_stack([traj.x, traj.y]), 2 * _Z_LINE)], colors=[EGO_COLOR],
-                            radii=0.12),
+            rr.LineStrips3D(
+                [_to3(np.column_stack([traj.x, traj.y]), 2 * _Z_LINE)], colors=[EGO_COLOR], radii=0.12
+            ),
         )
         self._log_candidates(decision)
         self._log_prediction(decision)
@@ -448,7 +450,9 @@ class RerunRecorder(RunObserver):
         rec.log(
             "world/ego",
             rr.Boxes3D.from_fields(
-                half_sizes=layout.half_sizes[:1], colors=[EGO_COLOR], labels=[layout.labels[0]],
+                half_sizes=layout.half_sizes[:1],
+                colors=[EGO_COLOR],
+                labels=[layout.labels[0]],
                 fill_mode="solid",
             ),
             static=True,
@@ -458,8 +462,10 @@ class RerunRecorder(RunObserver):
             rec.log(
                 "world/road_users/boxes",
                 rr.Boxes3D.from_fields(
-                    half_sizes=layout.half_sizes[boxes], colors=layout.colors[boxes],
-                    labels=[layout.labels[i] for i in boxes], fill_mode="solid",
+                    half_sizes=layout.half_sizes[boxes],
+                    colors=layout.colors[boxes],
+                    labels=[layout.labels[i] for i in boxes],
+                    fill_mode="solid",
                 ),
                 static=True,
             )
@@ -467,8 +473,10 @@ class RerunRecorder(RunObserver):
             rec.log(
                 "world/road_users/round",
                 rr.Cylinders3D.from_fields(
-                    lengths=2.0 * layout.z[round_], radii=layout.radius[round_],
-                    colors=layout.colors[round_], labels=[layout.labels[i] for i in round_],
+                    lengths=2.0 * layout.z[round_],
+                    radii=layout.radius[round_],
+                    colors=layout.colors[round_],
+                    labels=[layout.labels[i] for i in round_],
                     fill_mode="solid",
                 ),
                 static=True,
@@ -518,8 +526,13 @@ class RerunRecorder(RunObserver):
         colors = [_rgb(t) for t in pred.types]
         rec.log(
             "world/prediction/means",
-            rr.LineStrips3D(_to3(mean), colors=colors, radii=0.05,
-                            labels=[f"#{int(i)}" for i in pred.ids], show_labels=False),
+            rr.LineStrips3D(
+                _to3(mean),
+                colors=colors,
+                radii=0.05,
+                labels=[f"#{int(i)}" for i in pred.ids],
+                show_labels=False,
+            ),
         )
         steps = np.arange(self.config.prediction_stride, n_t, self.config.prediction_stride)
         if steps.size == 0:
@@ -530,8 +543,11 @@ class RerunRecorder(RunObserver):
         for scale, name in ((1.0, "sigma1"), (2.0, "sigma2")):
             rec.log(
                 f"world/prediction/{name}",
-                rr.LineStrips3D(_to3(ellipse_strips(m, cov, scale)), colors=ellipse_colors,
-                                radii=0.03 if scale == 1.0 else 0.015),
+                rr.LineStrips3D(
+                    _to3(ellipse_strips(m, cov, scale)),
+                    colors=ellipse_colors,
+                    radii=0.03 if scale == 1.0 else 0.015,
+                ),
             )
 
     def _blueprint(self, world: World) -> rrb.Blueprint:
@@ -550,8 +566,11 @@ class RerunRecorder(RunObserver):
         )
         return rrb.Blueprint(
             rrb.Horizontal(
-                rrb.Vertical(view, rrb.TextLogView(origin="/", contents=["decision", "impacts"],
-                                                   name="decisions"), row_shares=[3, 1]),
+                rrb.Vertical(
+                    view,
+                    rrb.TextLogView(origin="/", contents=["decision", "impacts"], name="decisions"),
+                    row_shares=[3, 1],
+                ),
                 rrb.Vertical(
                     rrb.TimeSeriesView(origin="series/risk", name="risk per road user"),
                     rrb.TimeSeriesView(origin="series/collision_probability", name="collision probability"),

@@ -202,9 +202,7 @@ def _main_line(spec: RoadSpec) -> np.ndarray:
     n_arc = max(int(spec.arc_length / _SAMPLE_M), 8)
     phi = np.linspace(0.0, angle, n_arc + 1)[1:]
     cx, cy = spec.lead_in, sign * spec.radius
-    arc = np.column_stack(
-        [cx + spec.radius * np.sin(phi), cy - sign * spec.radius * np.cos(phi)]
-    )
+    arc = np.column_stack([cx + spec.radius * np.sin(phi), cy - sign * spec.radius * np.cos(phi)])
     points.append(arc)
     rest = spec.length - spec.lead_in - spec.arc_length
     if rest > 1e-6:

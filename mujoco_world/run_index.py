@@ -244,8 +244,14 @@ class SafetyMetrics(RunObserver):
                 self.max_collision_probability = float(u.collision_probability)
 
 
-def severity(row_collisions: int, max_harm: float, min_distance: float, min_ttc: float,
-             max_collision_probability: float, thresholds: NearCrashThresholds) -> tuple[bool, float]:
+def severity(
+    row_collisions: int,
+    max_harm: float,
+    min_distance: float,
+    min_ttc: float,
+    max_collision_probability: float,
+    thresholds: NearCrashThresholds,
+) -> tuple[bool, float]:
     """Near-crash flag and severity score of a run (see the module docstring).
 
     Args:

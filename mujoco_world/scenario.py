@@ -115,9 +115,7 @@ class RoadSpec:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kind", parse_enum(RoadKind, "road", "kind", self.kind))
-        object.__setattr__(
-            self, "boundary", parse_enum(Boundary, "road", "boundary", self.boundary)
-        )
+        object.__setattr__(self, "boundary", parse_enum(Boundary, "road", "boundary", self.boundary))
         check_positive(
             "road",
             length=self.length,
@@ -243,7 +241,9 @@ class IdmSpec:
 
     def __post_init__(self) -> None:
         check_non_negative(
-            "idm", time_headway=self.time_headway, min_gap=self.min_gap,
+            "idm",
+            time_headway=self.time_headway,
+            min_gap=self.min_gap,
             reaction_time=self.reaction_time,
         )
         check_positive(
@@ -358,9 +358,7 @@ class LegalSpec:
     stop_until: float = math.inf
 
     def __post_init__(self) -> None:
-        check_non_negative(
-            "legal", speed_limit=self.speed_limit, lateral_half_width=self.lateral_half_width
-        )
+        check_non_negative("legal", speed_limit=self.speed_limit, lateral_half_width=self.lateral_half_width)
         check_finite("legal", stop_line=self.stop_line)
         check(
             not math.isnan(self.stop_until) and self.stop_until >= 0,
@@ -561,7 +559,8 @@ class Scenario:
 
     def __post_init__(self) -> None:
         check(
-            isinstance(self.name, str) and bool(self.name)
+            isinstance(self.name, str)
+            and bool(self.name)
             and all(c.isalnum() or c in "_-." for c in self.name),
             f"name must be a non-empty string of letters, digits, _ - ., got {self.name!r}",
         )

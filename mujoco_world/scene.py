@@ -168,8 +168,7 @@ def scene_xml(
         '  <compiler angle="radian"/>',
         f'  <option timestep="{timestep:.9g}" integrator="implicitfast" gravity="0 0 0"/>',
         "  <default>",
-        f'    <geom solref="{_fmt(contact.timeconst, contact.dampratio)}" '
-        f'friction="{friction}" condim="3"/>',
+        f'    <geom solref="{_fmt(contact.timeconst, contact.dampratio)}" friction="{friction}" condim="3"/>',
         '    <joint damping="0" armature="0" limited="false"/>',
         "  </default>",
         "  <worldbody>",
@@ -188,14 +187,11 @@ def scene_xml(
         affinity = _BODY_BIT | _WALL_BIT | (_KERB_BIT if body.type in MOTORISED_TYPES else 0)
         if body.is_round:
             r = body.radius
-            geom = (
-                f'type="capsule" fromto="0 0 {-half_h + r:.9g} 0 0 {half_h - r:.9g}" '
-                f'size="{r:.9g}"'
-            )
+            geom = f'type="capsule" fromto="0 0 {-half_h + r:.9g} 0 0 {half_h - r:.9g}" size="{r:.9g}"'
         else:
             geom = f'type="box" size="{_fmt(0.5 * body.length, 0.5 * body.width, half_h)}"'
         lines += [
-            f"    <body name={quoteattr(name)} pos=\"0 0 {half_h:.9g}\">",
+            f'    <body name={quoteattr(name)} pos="0 0 {half_h:.9g}">',
             f'      <joint name="{name}_x" type="slide" axis="1 0 0"/>',
             f'      <joint name="{name}_y" type="slide" axis="0 1 0"/>',
             f'      <joint name="{name}_yaw" type="hinge" axis="0 0 1"/>',
@@ -218,9 +214,7 @@ def scene_xml(
 def _restitution_pairs(bodies: Sequence[BodyProxy], contact: ContactSpec) -> list[str]:
     if not contact.restitution:
         return []
-    table = {
-        frozenset((r.a, r.b)): dampratio_for_restitution(r.e) for r in contact.restitution
-    }
+    table = {frozenset((r.a, r.b)): dampratio_for_restitution(r.e) for r in contact.restitution}
     friction = _fmt(contact.friction, contact.friction, 0.005, 0.0001, 0.0001)
     pairs = []
     for i, a in enumerate(bodies):
@@ -286,9 +280,7 @@ class Scene:
             ]
         )
         self.body_ids = np.array([mujoco.mj_name2id(m, obj.mjOBJ_BODY, n) for n in names])
-        self.geom_ids = np.array(
-            [mujoco.mj_name2id(m, obj.mjOBJ_GEOM, f"{n}_geom") for n in names]
-        )
+        self.geom_ids = np.array([mujoco.mj_name2id(m, obj.mjOBJ_GEOM, f"{n}_geom") for n in names])
         qpos_adr = m.jnt_qposadr[joints]
         dof_adr = m.jnt_dofadr[joints]
         expected = np.arange(3 * self.n).reshape(self.n, 3)
@@ -326,9 +318,7 @@ class Scene:
         yaw_rate: np.ndarray | float = 0.0,
     ) -> None:
         """Set positions [m], headings [rad] and velocities [m/s] of all bodies, shape (n,)."""
-        values = np.broadcast_arrays(
-            *(np.asarray(v, dtype=float) for v in (x, y, yaw, vx, vy, yaw_rate))
-        )
+        values = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, y, yaw, vx, vy, yaw_rate)))
         for value in values:
             check(value.shape in ((self.n,), ()), f"states must have shape ({self.n},)")
             check(bool(np.all(np.isfinite(value))), "Scene.set_states: states must be finite")

@@ -113,8 +113,14 @@ class World:
         px, py, pth, pk, _ = self.ego_path.evaluate(s_grid)
         n_grid = len(s_grid)
         self.ego_plan = TrajectoryReference(
-            0.0, np.arange(n_grid) * 0.1, px, py, pth, np.full(n_grid, ego.speed),
-            np.zeros(n_grid), pk,
+            0.0,
+            np.arange(n_grid) * 0.1,
+            px,
+            py,
+            pth,
+            np.full(n_grid, ego.speed),
+            np.zeros(n_grid),
+            pk,
         )
         self.crashed = np.zeros(self.n, dtype=bool)
         self.ego_crash_time: float | None = None
@@ -310,14 +316,20 @@ class World:
             self._track_max = max(self._track_max, err)
             p_ref[0], v_ref[0], a_ref[0], yaw_ref[0], rate_ref[0] = p, v, a, yaw, rate
         ctrl = tracking_forces(
-            self.control, scene.masses, scene.yaw_inertia, scene.qpos, scene.qvel,
-            p_ref, v_ref, a_ref, yaw_ref, rate_ref,
+            self.control,
+            scene.masses,
+            scene.yaw_inertia,
+            scene.qpos,
+            scene.qvel,
+            p_ref,
+            v_ref,
+            a_ref,
+            yaw_ref,
+            rate_ref,
         )
         if self.crashed.any():
             rows = np.flatnonzero(self.crashed)
-            brake = brake_forces(
-                self.control, scene.masses[rows], scene.yaw_inertia[rows], scene.qvel[rows]
-            )
+            brake = brake_forces(self.control, scene.masses[rows], scene.yaw_inertia[rows], scene.qvel[rows])
             # No braking during a crash pulse: it would contaminate the measured delta-v.
             brake[self.recorder.in_pulse[rows]] = 0.0
             ctrl[rows] = brake
@@ -400,10 +412,7 @@ class World:
         if bad:
             return "MuJoCo reported a bad acceleration (mjWARN_BADQACC) and reset the state"
         if self.recorder.max_penetration > max_penetration:
-            return (
-                f"penetration {self.recorder.max_penetration:.3f} m exceeds the bound "
-                f"{max_penetration} m"
-            )
+            return f"penetration {self.recorder.max_penetration:.3f} m exceeds the bound {max_penetration} m"
         return None
 
 

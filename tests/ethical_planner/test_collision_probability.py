@@ -104,11 +104,7 @@ def _random_case(rng):
         for _ in range(60):  # bisection on the separating-axis test along the direction
             mid = 0.5 * (lo + hi)
             centre = np.array(ego[:2]) + mid * direction
-            lo, hi = (
-                (mid, hi)
-                if _sat_overlap(ego, ego_size, centre, obs_yaw, obs_size)[0]
-                else (lo, mid)
-            )
+            lo, hi = (mid, hi) if _sat_overlap(ego, ego_size, centre, obs_yaw, obs_size)[0] else (lo, mid)
         dist = lo + rng.normal(0.0, 0.1)
     else:
         cov = _cov(rng.uniform(0.3, 3.0), rng.uniform(0.3, 3.0), rng.uniform(0, math.pi))
@@ -211,9 +207,7 @@ def test_continuous_at_vertices_and_edge_lines(seed):
 
 
 def test_far_obstacle_is_exactly_zero():
-    p, overlap = _single(
-        (0.0, 0.0, 0.3), (4.5, 1.8), (200.0, 5.0), _cov(3.0, 1.0, 0.2), 1.0, (4.5, 1.8)
-    )
+    p, overlap = _single((0.0, 0.0, 0.3), (4.5, 1.8), (200.0, 5.0), _cov(3.0, 1.0, 0.2), 1.0, (4.5, 1.8))
     assert p == 0.0
     assert not overlap
 
@@ -265,9 +259,7 @@ def test_batched_call_matches_single_calls():
     heading = rng.uniform(-math.pi, math.pi, (n_obs, n_t))
     length = np.array([0.5, 4.5, 10.0])
     width = np.array([0.5, 1.8, 2.5])
-    result = collision_probability(
-        ego_x, ego_y, ego_yaw, 4.5, 1.8, mean, cov, heading, length, width
-    )
+    result = collision_probability(ego_x, ego_y, ego_yaw, 4.5, 1.8, mean, cov, heading, length, width)
     assert 0.0 < result.probability.mean() < 1.0
     for i in range(n_traj):
         for k in range(n_obs):
@@ -342,9 +334,7 @@ def test_symmetric_in_ego_and_obstacle(ego, ego_size, offset, cov, obs_yaw, obs_
 
 @settings(max_examples=200, deadline=None)
 @given(_pose, _size, _offset, _cov_st, _angle, _size, st.floats(1.0, 3.0), st.integers(0, 3))
-def test_growing_a_footprint_never_lowers_p(
-    ego, ego_size, offset, cov, obs_yaw, obs_size, factor, which
-):
+def test_growing_a_footprint_never_lowers_p(ego, ego_size, offset, cov, obs_yaw, obs_size, factor, which):
     mean = (ego[0] + offset[0], ego[1] + offset[1])
     p, _ = _single(ego, ego_size, mean, cov, obs_yaw, obs_size)
     sizes = [*ego_size, *obs_size]
@@ -366,9 +356,7 @@ def test_polygon_mass_of_axis_aligned_rectangles():
     cov = np.zeros((50, 2, 2))
     cov[:, 0, 0], cov[:, 1, 1] = sig[:, 0] ** 2, sig[:, 1] ** 2
     expected = np.prod(ndtr((hi - mean) / sig) - ndtr((lo - mean) / sig), axis=1)
-    np.testing.assert_allclose(
-        polygon_gaussian_mass(vertices, mean, cov), expected, rtol=0, atol=1e-12
-    )
+    np.testing.assert_allclose(polygon_gaussian_mass(vertices, mean, cov), expected, rtol=0, atol=1e-12)
 
 
 def test_polygon_mass_is_additive_over_a_split():
@@ -378,9 +366,7 @@ def test_polygon_mass_is_additive_over_a_split():
     radius = rng.uniform(0.5, 3, (100, 1))
     hexagon = np.stack([radius * np.cos(angles), radius * np.sin(angles)], axis=-1)
     mean = rng.uniform(-2, 2, (100, 2))
-    cov = np.array(
-        [_cov(rng.uniform(0.2, 2), rng.uniform(0.05, 1), rng.uniform(0, 4)) for _ in range(100)]
-    )
+    cov = np.array([_cov(rng.uniform(0.2, 2), rng.uniform(0.05, 1), rng.uniform(0, 4)) for _ in range(100)])
     whole = polygon_gaussian_mass(hexagon, mean, cov)
     first = polygon_gaussian_mass(hexagon[:, [0, 1, 2, 3]], mean, cov)
     second = polygon_gaussian_mass(hexagon[:, [3, 4, 5, 0]], mean, cov)
@@ -509,8 +495,10 @@ def test_fast_path_matches_exact_polygon_mass(seed):
     scale = [0.05, 0.5, 2.0, 6.0, 1.0, 0.2][seed]
     cov = np.array(
         [
-            [_cov(scale * rng.uniform(0.3, 1.5), scale * rng.uniform(0.05, 1.0), rng.uniform(0, 4))
-             for _ in range(n_t)]
+            [
+                _cov(scale * rng.uniform(0.3, 1.5), scale * rng.uniform(0.05, 1.0), rng.uniform(0, 4))
+                for _ in range(n_t)
+            ]
             for _ in range(n_obs)
         ]
     )
@@ -526,7 +514,9 @@ def test_fast_path_matches_exact_polygon_mass(seed):
         for k in range(n_obs):
             for t in range(n_t):
                 poly = _octagon(
-                    (ego_x[i, t], ego_y[i, t], ego_yaw[i, t]), size, heading[k, t],
+                    (ego_x[i, t], ego_y[i, t], ego_yaw[i, t]),
+                    size,
+                    heading[k, t],
                     (length[k], width[k]),
                 )
                 exact = polygon_gaussian_mass(poly, mean[k, t], cov[k, t])

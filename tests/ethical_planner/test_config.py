@@ -20,7 +20,9 @@ def test_unknown_key_is_named(tmp_path):
 
 def test_toml_overrides_apply(tmp_path):
     path = tmp_path / "planner.toml"
-    path.write_text('preset = "selfish"\n[risk]\nmax_acceptable_risk = 0.02\n[sampling]\nhorizons = [2.0, 3.0]\n')
+    path.write_text(
+        'preset = "selfish"\n[risk]\nmax_acceptable_risk = 0.02\n[sampling]\nhorizons = [2.0, 3.0]\n'
+    )
     config = load_config(path)
     assert config.name == "selfish"
     assert config.risk.max_acceptable_risk == 0.02

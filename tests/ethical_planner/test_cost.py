@@ -46,13 +46,30 @@ def test_hand_computed_principles():
 
 
 def test_total_cost_uses_eq5_for_valid_and_eq6_otherwise():
-    weights = CostWeights(risk=10.0, bayes=1.0, equality=0.0, maximin=0.0, jerk_lon=1.0,
-                          jerk_lat=0.0, speed=2.0, path_distance=0.0)
+    weights = CostWeights(
+        risk=10.0,
+        bayes=1.0,
+        equality=0.0,
+        maximin=0.0,
+        jerk_lon=1.0,
+        jerk_lat=0.0,
+        speed=2.0,
+        path_distance=0.0,
+    )
     risks = np.array([[0.2], [0.2]])
     zeros = np.zeros((2, 1))
     costs = total_cost(
-        risks, zeros, zeros, zeros.astype(bool), np.zeros(2), np.array([3.0, 3.0]), np.zeros(2),
-        np.array([1.5, 1.5]), np.zeros(2), np.array([Validity.VALID, Validity.COLLISION]), weights,
+        risks,
+        zeros,
+        zeros,
+        zeros.astype(bool),
+        np.zeros(2),
+        np.array([3.0, 3.0]),
+        np.zeros(2),
+        np.array([1.5, 1.5]),
+        np.zeros(2),
+        np.array([Validity.VALID, Validity.COLLISION]),
+        weights,
     )
     assert costs.total[0] == pytest.approx(10 * 0.2 + 3.0 + 2 * 1.5)
     assert costs.total[1] == pytest.approx(0.2)

@@ -15,7 +15,7 @@ from ethical_planner.validity import Validity
 
 
 def test_maximum_acceptable_risk_forbids_the_risky_overtake():
-    """Paper Fig. 3: without R_max the risk-blind planner squeezes past the cyclist; with it, it stays behind."""
+    """Paper Fig. 3: without R_max the risk-blind planner passes the cyclist; with R_max it stays behind."""
     situation = overtaking_cyclist()
     r_max = 0.01
     base = preset("standard").with_overrides({"sampling": {"horizons": [3.0]}})
@@ -87,17 +87,32 @@ def test_risk_of_the_chosen_plan_matches_a_scalar_recomputation():
         best = 0.0
         for t in range(len(traj.t)):
             p = collision_probability(
-                traj.x[None, [t]], traj.y[None, [t]], traj.yaw[None, [t]], EGO_SHAPE.length, EGO_SHAPE.width,
-                pred.mean[[k]][:, [t]], pred.cov[[k]][:, [t]], pred.heading[[k]][:, [t]],
-                pred.length[[k]], pred.width[[k]],
+                traj.x[None, [t]],
+                traj.y[None, [t]],
+                traj.yaw[None, [t]],
+                EGO_SHAPE.length,
+                EGO_SHAPE.width,
+                pred.mean[[k]][:, [t]],
+                pred.cov[[k]][:, [t]],
+                pred.heading[[k]][:, [t]],
+                pred.length[[k]],
+                pred.width[[k]],
             ).probability[0, 0, 0]
             if p == 0.0:
                 continue
             harm = collision_harm(
-                1475.0, [traj.v[t] * math.cos(traj.yaw[t]), traj.v[t] * math.sin(traj.yaw[t])],
-                [traj.x[t], traj.y[t]], traj.yaw[t], user.mass,
-                [pred.speed[k, t] * math.cos(pred.heading[k, t]), pred.speed[k, t] * math.sin(pred.heading[k, t])],
-                pred.mean[k, t], pred.heading[k, t], np.array(user.is_vulnerable),
+                1475.0,
+                [traj.v[t] * math.cos(traj.yaw[t]), traj.v[t] * math.sin(traj.yaw[t])],
+                [traj.x[t], traj.y[t]],
+                traj.yaw[t],
+                user.mass,
+                [
+                    pred.speed[k, t] * math.cos(pred.heading[k, t]),
+                    pred.speed[k, t] * math.sin(pred.heading[k, t]),
+                ],
+                pred.mean[k, t],
+                pred.heading[k, t],
+                np.array(user.is_vulnerable),
             ).harm_obs
             best = max(best, float(p * harm))
         assert decision.road_users[k].risk == pytest.approx(best, rel=1e-9, abs=1e-15)
@@ -112,7 +127,9 @@ def test_bad_ego_state_is_rejected(field, value):
 
 def test_reference_path_shorter_than_the_horizon_is_extended_straight():
     env = RoadEnvironment.along_path([[-5, 0], [10, 0]], lanes_left=1)
-    car = RoadUser(1, RoadUserType.CAR, KinematicState(40, 3.5, math.pi, 10), DEFAULT_SHAPES[RoadUserType.CAR])
+    car = RoadUser(
+        1, RoadUserType.CAR, KinematicState(40, 3.5, math.pi, 10), DEFAULT_SHAPES[RoadUserType.CAR]
+    )
     decision = Planner(preset("ethical"), env).plan(KinematicState(0, 0, 0, 12), [car])
     assert np.all(np.isfinite(decision.trajectory.x)) and decision.trajectory.x[-1] > 10
     assert all(math.isfinite(v) for v in decision.costs.values())
@@ -133,7 +150,8 @@ def test_calibrated_delta_v_changes_the_harm_the_planner_computes(tmp_path):
 
     identity = DeltaVCorrection.identity()
     halved = DeltaVCorrection(
-        identity.angle_edges_deg, identity.offset_edges,
+        identity.angle_edges_deg,
+        identity.offset_edges,
         tuple(tuple(0.5 for _ in row) for row in identity.factors),
     )
     path = tmp_path / "calibration.json"

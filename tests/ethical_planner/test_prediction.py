@@ -35,14 +35,26 @@ def test_covariance_grows_and_is_aligned_with_heading():
 
 
 def test_covariance_floor_replaces_zero_covariance():
-    pred = predict_constant_turn_rate([_car(KinematicState(0, 0, 0, 0))], np.zeros(1), PredictionConfig(
-        sigma0_long=0, sigma0_lat=0, covariance_floor=0.1))
+    pred = predict_constant_turn_rate(
+        [_car(KinematicState(0, 0, 0, 0))],
+        np.zeros(1),
+        PredictionConfig(sigma0_long=0, sigma0_lat=0, covariance_floor=0.1),
+    )
     np.testing.assert_allclose(np.linalg.eigvalsh(pred.cov[0, 0]), [0.1, 0.1])
 
 
 def _prediction(cov):
-    return Prediction(np.array([7]), (RoadUserType.CAR,), np.zeros((1, 1, 2)), cov, np.zeros((1, 1)),
-                      np.zeros((1, 1)), np.ones(1), np.ones(1), np.ones(1))
+    return Prediction(
+        np.array([7]),
+        (RoadUserType.CAR,),
+        np.zeros((1, 1, 2)),
+        cov,
+        np.zeros((1, 1)),
+        np.zeros((1, 1)),
+        np.ones(1),
+        np.ones(1),
+        np.ones(1),
+    )
 
 
 def test_non_psd_covariance_is_rejected_naming_the_road_user():
@@ -55,11 +67,18 @@ def test_non_psd_covariance_is_rejected_naming_the_road_user():
 def test_empty_prediction_and_duplicate_ids():
     assert predict_constant_turn_rate([], np.zeros(3), PredictionConfig()).mean.shape == (0, 3, 2)
     with pytest.raises(ValueError, match="unique"):
-        predict_constant_turn_rate([_car(KinematicState(0, 0, 0, 1)), _car(KinematicState(5, 0, 0, 1))],
-                                   np.zeros(2), PredictionConfig())
+        predict_constant_turn_rate(
+            [_car(KinematicState(0, 0, 0, 1)), _car(KinematicState(5, 0, 0, 1))],
+            np.zeros(2),
+            PredictionConfig(),
+        )
 
 
 def test_parked_vehicles_keep_their_initial_uncertainty():
-    parked = RoadUser(4, RoadUserType.PARKED_VEHICLE, KinematicState(0, 0, 0, 0), DEFAULT_SHAPES[RoadUserType.CAR])
-    pred = predict_constant_turn_rate([parked], np.linspace(0, 3, 31), PredictionConfig(covariance_floor=1e-6))
+    parked = RoadUser(
+        4, RoadUserType.PARKED_VEHICLE, KinematicState(0, 0, 0, 0), DEFAULT_SHAPES[RoadUserType.CAR]
+    )
+    pred = predict_constant_turn_rate(
+        [parked], np.linspace(0, 3, 31), PredictionConfig(covariance_floor=1e-6)
+    )
     np.testing.assert_allclose(pred.cov[0, -1], pred.cov[0, 0])

@@ -20,24 +20,45 @@ def test_base_responsibility_grows_with_mass_and_spares_vulnerable_users():
 
 def test_legal_longitudinal_bounds_by_hand():
     env = RoadEnvironment.along_path([[0, 0], [100, 0]])
-    user = RoadUser(1, "car", KinematicState(0, 0, 0, 10), DEFAULT_SHAPES[RoadUserType.CAR],
-                    legal=LegalCorridor(speed_limit=12.0, lateral_half_width=1.0, max_acceleration=2.0,
-                                        max_deceleration=8.0))
+    user = RoadUser(
+        1,
+        "car",
+        KinematicState(0, 0, 0, 10),
+        DEFAULT_SHAPES[RoadUserType.CAR],
+        legal=LegalCorridor(
+            speed_limit=12.0, lateral_half_width=1.0, max_acceleration=2.0, max_deceleration=8.0
+        ),
+    )
     corridors = LegalCorridors.of([user], env)
     low, high = corridors.longitudinal_bounds(np.array([0.5, 2.0]))
     # braking: 10*0.5 - 4*0.25 = 4; stopped after 1.25 s at 6.25 m
     np.testing.assert_allclose(low, [4.0, 6.25])
     # accelerating 2 m/s^2 to 12 m/s (reached at 1 s): 0.5 -> 5.25; 2.0 -> 11 + 12 = 23
     np.testing.assert_allclose(high, [5.25, 23.0])
-    stopped = LegalCorridors.of([RoadUser(2, "car", KinematicState(0, 0, 0, 10), DEFAULT_SHAPES[RoadUserType.CAR],
-                                          legal=LegalCorridor(12.0, 1.0, stop_distance=3.0))], env)
+    stopped = LegalCorridors.of(
+        [
+            RoadUser(
+                2,
+                "car",
+                KinematicState(0, 0, 0, 10),
+                DEFAULT_SHAPES[RoadUserType.CAR],
+                legal=LegalCorridor(12.0, 1.0, stop_distance=3.0),
+            )
+        ],
+        env,
+    )
     assert stopped.longitudinal_bounds(np.array([2.0]))[1][0] == pytest.approx(3.0)
 
 
 def _crossing_scene(legal):
     env = RoadEnvironment.along_path([[-30, 0], [200, 0]], lanes_left=1, margin=2.5)
-    pedestrian = RoadUser(1, RoadUserType.PEDESTRIAN, KinematicState(14.0, -3.0, math.pi / 2, 1.8),
-                          DEFAULT_SHAPES[RoadUserType.PEDESTRIAN], legal=legal)
+    pedestrian = RoadUser(
+        1,
+        RoadUserType.PEDESTRIAN,
+        KinematicState(14.0, -3.0, math.pi / 2, 1.8),
+        DEFAULT_SHAPES[RoadUserType.PEDESTRIAN],
+        legal=legal,
+    )
     config = preset("ethical_responsible")
     return Planner(config, env).plan(KinematicState(0, 0, 0, 8.0), [pedestrian])
 

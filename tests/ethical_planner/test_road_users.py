@@ -4,8 +4,8 @@ import pytest
 
 from ethical_planner.road_users import (
     DEFAULT_SHAPES,
-    KinematicState,
     MIN_CAR_MASS_KG,
+    KinematicState,
     RoadUser,
     RoadUserType,
     Shape,

@@ -56,8 +56,12 @@ def test_grid_shape_and_struct_of_arrays():
     assert cands.t[-1] == pytest.approx(3.0)
     # The 2 s candidates continue at constant speed and offset after their horizon.
     short = cands.horizon == 2.0
-    np.testing.assert_allclose(cands.v[short, 20:], np.repeat(cands.end_speed[short, None], 11, axis=1), atol=1e-9)
-    np.testing.assert_allclose(cands.d[short, 20:], np.repeat(cands.end_offset[short, None], 11, axis=1), atol=1e-9)
+    np.testing.assert_allclose(
+        cands.v[short, 20:], np.repeat(cands.end_speed[short, None], 11, axis=1), atol=1e-9
+    )
+    np.testing.assert_allclose(
+        cands.d[short, 20:], np.repeat(cands.end_offset[short, None], 11, axis=1), atol=1e-9
+    )
 
 
 def test_cartesian_states_agree_with_finite_differences():
@@ -94,8 +98,14 @@ def test_constant_offset_on_a_circle_has_the_offset_curvature(offset):
     yaw0 = float(path.heading(20.0))
     state = KinematicState(float(x0), float(y0), yaw0, speed_on_path * (1 - offset / radius))
     start = frenet_state(state, path)
-    config = SamplingConfig(n_speeds=1, n_offsets=1, d_min=offset, d_max=offset,
-                            max_end_acceleration=1e-9, max_end_deceleration=1e-9)
+    config = SamplingConfig(
+        n_speeds=1,
+        n_offsets=1,
+        d_min=offset,
+        d_max=offset,
+        max_end_acceleration=1e-9,
+        max_end_deceleration=1e-9,
+    )
     cands = sample_candidates(start, path, config, 30)
     np.testing.assert_allclose(cands.kappa[0], 1 / (radius - offset), rtol=1e-2)
     np.testing.assert_allclose(cands.v[0], speed_on_path * (1 - offset / radius), rtol=1e-3)

@@ -45,8 +45,16 @@ def test_run_rejects_bad_input(capsys):
 def test_demo_runs_on_two_workers_and_resumes(tmp_path, capsys):
     out = tmp_path / "demo"
     args = [
-        "demo", "--scenarios", "oncoming_drift,red_light_runner", "--planners", "standard",
-        "--out", str(out), "--workers", "2", "--no-progress",
+        "demo",
+        "--scenarios",
+        "oncoming_drift,red_light_runner",
+        "--planners",
+        "standard",
+        "--out",
+        str(out),
+        "--workers",
+        "2",
+        "--no-progress",
     ]
     assert main(args) == 0
     text = capsys.readouterr().out
@@ -70,8 +78,20 @@ def test_demo_runs_on_two_workers_and_resumes(tmp_path, capsys):
 def test_demo_runs_random_variants(tmp_path, capsys):
     out = tmp_path / "random"
     args = [
-        "demo", "--random", "2", "--scenario-seed", "5", "--scenarios", "red_light_runner",
-        "--planners", "standard", "--out", str(out), "--workers", "1", "--no-progress",
+        "demo",
+        "--random",
+        "2",
+        "--scenario-seed",
+        "5",
+        "--scenarios",
+        "red_light_runner",
+        "--planners",
+        "standard",
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--no-progress",
     ]
     assert main(args) == 0
     runs = sorted(p.name for p in out.iterdir() if p.is_dir())

@@ -26,13 +26,22 @@ CASES = {
     "head_on": ("car", KinematicState(0.0, 0.0, 0.0, 15.0), "car", KinematicState(6.0, 0.0, math.pi, 15.0)),
     "rear_end": ("car", KinematicState(0.0, 0.0, 0.0, 20.0), "car", KinematicState(6.0, 0.0, 0.0, 5.0)),
     "car_pedestrian": (
-        "car", KinematicState(0.0, 0.0, 0.0, 12.0), "pedestrian", KinematicState(3.0, 0.0, math.pi / 2, 1.4),
+        "car",
+        KinematicState(0.0, 0.0, 0.0, 12.0),
+        "pedestrian",
+        KinematicState(3.0, 0.0, math.pi / 2, 1.4),
     ),
     "truck_car": (
-        "truck", KinematicState(0.0, 0.0, 0.0, 15.0), "car", KinematicState(9.0, 0.0, math.pi, 10.0),
+        "truck",
+        KinematicState(0.0, 0.0, 0.0, 15.0),
+        "car",
+        KinematicState(9.0, 0.0, math.pi, 10.0),
     ),
     "car_bicycle_rear": (
-        "car", KinematicState(0.0, 0.0, 0.0, 14.0), "bicycle", KinematicState(4.0, 0.0, 0.0, 5.0),
+        "car",
+        KinematicState(0.0, 0.0, 0.0, 14.0),
+        "bicycle",
+        KinematicState(4.0, 0.0, 0.0, 5.0),
     ),
 }
 

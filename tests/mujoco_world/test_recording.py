@@ -88,13 +88,26 @@ def test_logged_impact_delta_v_equals_summary(crash_run):
 def test_recording_has_expected_entities(crash_run):
     summary, _, _, chunks = crash_run
     expected = {
-        "/world/road/surface", "/world/road/boundary", "/world/road/lanes",
-        "/world/ego", "/world/road_users/boxes", "/world/ego_path",
-        "/world/plan/chosen", "/world/plan/candidates",
-        "/world/prediction/means", "/world/prediction/sigma1", "/world/prediction/sigma2",
-        "/decision", "/impacts", "/series/ego/risk", "/series/ego/max_acceptable_risk",
-        "/series/planning_ms", "/series/cost/total", "/series/risk/user_1",
-        "/series/collision_probability/user_1", "/series/harm/user_1",
+        "/world/road/surface",
+        "/world/road/boundary",
+        "/world/road/lanes",
+        "/world/ego",
+        "/world/road_users/boxes",
+        "/world/ego_path",
+        "/world/plan/chosen",
+        "/world/plan/candidates",
+        "/world/prediction/means",
+        "/world/prediction/sigma1",
+        "/world/prediction/sigma2",
+        "/decision",
+        "/impacts",
+        "/series/ego/risk",
+        "/series/ego/max_acceptable_risk",
+        "/series/planning_ms",
+        "/series/cost/total",
+        "/series/risk/user_1",
+        "/series/collision_probability/user_1",
+        "/series/harm/user_1",
     }
     assert expected <= set(chunks)
     # One planning cycle per cycle-timeline entry, candidates capped by the config.
@@ -141,8 +154,12 @@ def test_ellipse_strips_axes():
 
 @pytest.mark.parametrize(
     ("field", "kwargs"),
-    [("frame_rate", {"frame_rate": 0}), ("candidates", {"candidates": -1}),
-     ("prediction_stride", {"prediction_stride": 0}), ("flush_interval", {"flush_interval": 0})],
+    [
+        ("frame_rate", {"frame_rate": 0}),
+        ("candidates", {"candidates": -1}),
+        ("prediction_stride", {"prediction_stride": 0}),
+        ("flush_interval", {"flush_interval": 0}),
+    ],
 )
 def test_config_rejects_bad_values(field, kwargs):
     with pytest.raises(ValueError, match=field):

@@ -25,20 +25,44 @@ from mujoco_world.runner import RunSummary
 
 def summary(min_distance=10.0, collisions=(), scenario="s", seed=0):
     return RunSummary(
-        scenario=scenario, planner="ethical", seed=seed, outcome="timeout", reason="", duration=1.0,
-        steps=1000, cycles=10, collisions=tuple(collisions), ego_collided=bool(collisions),
-        max_risk={"ego": 0.01, "third_party": 0.02, "vulnerable": 0.0}, top_risks={}, harm={},
-        min_distance=min_distance, min_distance_vulnerable=math.nan, tracking_rms=0.0,
-        tracking_max=0.0, progress=0.0, levels={}, timings={},
+        scenario=scenario,
+        planner="ethical",
+        seed=seed,
+        outcome="timeout",
+        reason="",
+        duration=1.0,
+        steps=1000,
+        cycles=10,
+        collisions=tuple(collisions),
+        ego_collided=bool(collisions),
+        max_risk={"ego": 0.01, "third_party": 0.02, "vulnerable": 0.0},
+        top_risks={},
+        harm={},
+        min_distance=min_distance,
+        min_distance_vulnerable=math.nan,
+        tracking_rms=0.0,
+        tracking_max=0.0,
+        progress=0.0,
+        levels={},
+        timings={},
     )
 
 
 def row(run_id, near, score, collisions=0, distance=5.0):
     return IndexRow(
-        run_id=run_id, scenario="s", planner="ethical", seed=0, outcome="timeout",
-        collisions=collisions, max_harm_measured=0.0, max_harm_predicted=0.0,
-        min_distance=distance, min_ttc=math.inf, max_collision_probability=0.0,
-        near_crash=near, severity=score,
+        run_id=run_id,
+        scenario="s",
+        planner="ethical",
+        seed=0,
+        outcome="timeout",
+        collisions=collisions,
+        max_harm_measured=0.0,
+        max_harm_predicted=0.0,
+        min_distance=distance,
+        min_ttc=math.inf,
+        max_collision_probability=0.0,
+        near_crash=near,
+        severity=score,
     )
 
 
@@ -55,8 +79,12 @@ def test_index_survives_truncated_last_line(tmp_path):
 
 
 def test_near_crash_ranking_worst_first():
-    rows = [row("far", False, 0.0), row("close", True, 0.3, distance=0.3),
-            row("crash", True, 1.2, collisions=1, distance=-0.1), row("closer", True, 0.8, distance=0.1)]
+    rows = [
+        row("far", False, 0.0),
+        row("close", True, 0.3, distance=0.3),
+        row("crash", True, 1.2, collisions=1, distance=-0.1),
+        row("closer", True, 0.8, distance=0.1),
+    ]
     assert [r.run_id for r in near_crashes(rows)] == ["crash", "closer", "close"]
     assert [r.run_id for r in near_crashes(rows, top=1)] == ["crash"]
 
@@ -81,11 +109,13 @@ def test_thresholds_reject_bad_values(name):
 
 def test_ttc_head_on_and_parallel():
     ego = np.array([0.0, 0.0, 0.0, 10.0, 0.0, 4.0, 2.0])
-    others = np.array([
-        [30.0, 0.0, math.pi, -5.0, 0.0, 4.0, 2.0],  # head-on: gap 26 m at 15 m/s
-        [0.0, 5.0, 0.0, 10.0, 0.0, 4.0, 2.0],  # parallel, same speed: never
-        [1.0, 0.5, 0.3, 0.0, 0.0, 4.0, 2.0],  # overlapping now
-    ])
+    others = np.array(
+        [
+            [30.0, 0.0, math.pi, -5.0, 0.0, 4.0, 2.0],  # head-on: gap 26 m at 15 m/s
+            [0.0, 5.0, 0.0, 10.0, 0.0, 4.0, 2.0],  # parallel, same speed: never
+            [1.0, 0.5, 0.3, 0.0, 0.0, 4.0, 2.0],  # overlapping now
+        ]
+    )
     ttc = time_to_collision(ego, others, horizon=10.0)
     assert ttc[0] == pytest.approx(26.0 / 15.0)
     assert ttc[1] == math.inf

@@ -17,18 +17,30 @@ from mujoco_world.world import ObservationNoise
 
 def third_party_crash(duration=6.0):
     """Two cars meet head-on in the oncoming lane at t ~ 1.8 s; the ego drives by."""
-    return scenario_from_dict({
-        "name": "third_party_crash",
-        "road": {"length": 300.0},
-        "ego": {"s0": 10.0, "speed": 10.0},
-        "duration": duration,
-        "road_users": [
-            {"name": "east", "type": "car", "s0": 100.0, "route": {"lane": 1},
-             "behaviour": {"kind": "scripted", "speed": 10.0}},
-            {"name": "west", "type": "car", "s0": 160.0, "route": {"lane": 0, "direction": -1},
-             "behaviour": {"kind": "scripted", "speed": 10.0}},
-        ],
-    })
+    return scenario_from_dict(
+        {
+            "name": "third_party_crash",
+            "road": {"length": 300.0},
+            "ego": {"s0": 10.0, "speed": 10.0},
+            "duration": duration,
+            "road_users": [
+                {
+                    "name": "east",
+                    "type": "car",
+                    "s0": 100.0,
+                    "route": {"lane": 1},
+                    "behaviour": {"kind": "scripted", "speed": 10.0},
+                },
+                {
+                    "name": "west",
+                    "type": "car",
+                    "s0": 160.0,
+                    "route": {"lane": 0, "direction": -1},
+                    "behaviour": {"kind": "scripted", "speed": 10.0},
+                },
+            ],
+        }
+    )
 
 
 def assert_json_clean(summary):

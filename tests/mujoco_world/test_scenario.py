@@ -132,8 +132,14 @@ def test_catalog_has_the_classics():
     names = catalog_names()
     assert len(names) >= 8
     for required in (
-        "overtake_cyclist", "pedestrian_behind_parked", "highway_cut_in", "tailgater_sudden_stop",
-        "red_light_runner", "turning_truck_cyclist", "oncoming_drift", "dense_urban",
+        "overtake_cyclist",
+        "pedestrian_behind_parked",
+        "highway_cut_in",
+        "tailgater_sudden_stop",
+        "red_light_runner",
+        "turning_truck_cyclist",
+        "oncoming_drift",
+        "dense_urban",
     ):
         assert required in names
     assert len(get_scenario("dense_urban").road_users) >= 18

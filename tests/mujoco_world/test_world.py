@@ -54,9 +54,16 @@ def test_tracking_force_stays_in_the_friction_circle():
     config = ControlConfig()
     mass = np.array([1475.0, 75.0])
     forces = tracking_forces(
-        config, mass, np.array([3000.0, 3.0]), np.zeros((2, 3)), np.zeros((2, 3)),
-        np.array([[50.0, 0.0], [0.0, -20.0]]), np.zeros((2, 2)), np.array([[30.0, 0.0], [0.0, 0.0]]),
-        np.zeros(2), np.zeros(2),
+        config,
+        mass,
+        np.array([3000.0, 3.0]),
+        np.zeros((2, 3)),
+        np.zeros((2, 3)),
+        np.array([[50.0, 0.0], [0.0, -20.0]]),
+        np.zeros((2, 2)),
+        np.array([[30.0, 0.0], [0.0, 0.0]]),
+        np.zeros(2),
+        np.zeros(2),
     )
     planar = np.hypot(forces[:, 0], forces[:, 1])
     np.testing.assert_allclose(planar, config.friction_mu * GRAVITY * mass)
@@ -74,18 +81,32 @@ def test_smoothstep_profile_is_smooth_and_holds():
 
 
 def test_idm_follower_stops_behind_a_braking_leader():
-    scenario = scenario_from_dict({
-        "name": "follow",
-        "road": {"length": 400.0},
-        "ego": {"s0": 380.0, "speed": 0.0, "goal_s": 395.0},
-        "road_users": [
-            {"name": "lead", "type": "car", "s0": 60.0,
-             "behaviour": {"kind": "scripted", "speed": 12.0, "start_time": 3.0,
-                           "speed_profile": [[0.0, 12.0], [3.0, 0.0]]}},
-            {"name": "follower", "type": "car", "s0": 30.0,
-             "behaviour": {"kind": "idm", "speed": 12.0, "idm": {"time_headway": 1.2, "min_gap": 2.0}}},
-        ],
-    })
+    scenario = scenario_from_dict(
+        {
+            "name": "follow",
+            "road": {"length": 400.0},
+            "ego": {"s0": 380.0, "speed": 0.0, "goal_s": 395.0},
+            "road_users": [
+                {
+                    "name": "lead",
+                    "type": "car",
+                    "s0": 60.0,
+                    "behaviour": {
+                        "kind": "scripted",
+                        "speed": 12.0,
+                        "start_time": 3.0,
+                        "speed_profile": [[0.0, 12.0], [3.0, 0.0]],
+                    },
+                },
+                {
+                    "name": "follower",
+                    "type": "car",
+                    "s0": 30.0,
+                    "behaviour": {"kind": "idm", "speed": 12.0, "idm": {"time_headway": 1.2, "min_gap": 2.0}},
+                },
+            ],
+        }
+    )
     world = World(scenario)
     world.set_ego_plan(standstill(world))
     for _ in range(15000):
@@ -97,18 +118,26 @@ def test_idm_follower_stops_behind_a_braking_leader():
 
 
 def test_pedestrian_waits_for_the_gap_then_crosses():
-    scenario = scenario_from_dict({
-        "name": "crossing",
-        "road": {"length": 300.0},
-        "ego": {"s0": 5.0, "speed": 0.0, "goal_s": 290.0},
-        "road_users": [
-            {"name": "ped", "type": "pedestrian",
-             "route": {"road": "waypoints", "waypoints": [[100.0, -6.0], [100.0, 6.0]]},
-             "behaviour": {"kind": "pedestrian", "speed": 1.4,
-                           "crossing": {"wait_at": 1.5, "gap_time": 8.0}}},
-            {"name": "car", "type": "car", "s0": 40.0, "behaviour": {"kind": "scripted", "speed": 10.0}},
-        ],
-    })
+    scenario = scenario_from_dict(
+        {
+            "name": "crossing",
+            "road": {"length": 300.0},
+            "ego": {"s0": 5.0, "speed": 0.0, "goal_s": 290.0},
+            "road_users": [
+                {
+                    "name": "ped",
+                    "type": "pedestrian",
+                    "route": {"road": "waypoints", "waypoints": [[100.0, -6.0], [100.0, 6.0]]},
+                    "behaviour": {
+                        "kind": "pedestrian",
+                        "speed": 1.4,
+                        "crossing": {"wait_at": 1.5, "gap_time": 8.0},
+                    },
+                },
+                {"name": "car", "type": "car", "s0": 40.0, "behaviour": {"kind": "scripted", "speed": 10.0}},
+            ],
+        }
+    )
     world = World(scenario)
     world.set_ego_plan(standstill(world))
     ys, car_x = [], []
@@ -158,12 +187,14 @@ def test_observation_noise_needs_a_generator_and_is_seeded():
 
 
 def test_crashed_bodies_brake_to_rest_and_controls_are_cut():
-    scenario = scenario_from_dict({
-        "name": "crash",
-        "road": {"length": 300.0},
-        "ego": {"s0": 10.0, "speed": 15.0, "goal_s": 290.0},
-        "road_users": [{"name": "wall_car", "type": "car", "s0": 40.0, "behaviour": {"kind": "parked"}}],
-    })
+    scenario = scenario_from_dict(
+        {
+            "name": "crash",
+            "road": {"length": 300.0},
+            "ego": {"s0": 10.0, "speed": 15.0, "goal_s": 290.0},
+            "road_users": [{"name": "wall_car", "type": "car", "s0": 40.0, "behaviour": {"kind": "parked"}}],
+        }
+    )
     world = World(scenario)
     measured = []
     for _ in range(6000):
