@@ -154,12 +154,10 @@ class RiskConfig:
 
     def __post_init__(self) -> None:
         for name in ("harm_model", "pedestrian_model"):
-            value = getattr(self, name)
             try:
-                object.__setattr__(self, name, HarmModel(value))
-            except ValueError:
-                allowed = ", ".join(m.value for m in HarmModel)
-                raise ValueError(f"risk.{name}: unknown harm model {value!r}; allowed: {allowed}") from None
+                object.__setattr__(self, name, HarmModel.parse(getattr(self, name)))
+            except ValueError as error:
+                raise ValueError(f"risk.{name}: {error}") from None
         _finite("risk", self)
         _check(
             self.delta_v_correction is None or isinstance(self.delta_v_correction, str),

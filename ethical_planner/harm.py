@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike
 from scipy.special import expit
 
 from .dv_correction import DeltaVCorrection, impact_offset_fraction, velocity_angle
+from .enums import parse_enum
 
 _TWO_PI = 2.0 * math.pi
 
@@ -50,11 +51,7 @@ class HarmModel(StrEnum):
     @classmethod
     def parse(cls, value: str | HarmModel) -> HarmModel:
         """Return the model named by ``value`` or raise a ValueError listing the allowed names."""
-        try:
-            return cls(value)
-        except ValueError:
-            allowed = ", ".join(m.value for m in cls)
-            raise ValueError(f"unknown harm model {value!r}; allowed: {allowed}") from None
+        return parse_enum(cls, value, "harm model")
 
 
 class FunctionalForm(StrEnum):
