@@ -324,6 +324,7 @@ def run_scenario(
             observer.on_impact(rec)
         timing["measurement"] += clock() - t0
 
+    interrupted = False
     try:
         while step < max_steps:
             if step % steps_per_cycle == 0 and not world.crashed[0]:
@@ -383,6 +384,10 @@ def run_scenario(
         else:
             outcome = "crash" if first_crash is not None else "timeout"
             reason = f"time limit of {scenario.duration} s reached"
+    except KeyboardInterrupt:
+        # Ctrl-C: close the run as failed (recording, index row), then stop the caller.
+        interrupted = True
+        outcome, reason = "failed", f"interrupted at t = {world.time:.3f} s"
     except _PlannerError as wrapped:
         error = wrapped.error
         outcome = "failed"
@@ -432,4 +437,6 @@ def run_scenario(
         timings=timing,
     )
     observer.on_end(summary)
+    if interrupted:
+        raise KeyboardInterrupt(reason)
     return summary

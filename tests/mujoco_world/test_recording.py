@@ -164,3 +164,30 @@ def test_ellipse_strips_axes():
 def test_config_rejects_bad_values(field, kwargs):
     with pytest.raises(ValueError, match=field):
         RecorderConfig(**kwargs)
+
+
+class Interrupt(RunObserver):
+    """Presses Ctrl-C at the given planning cycle."""
+
+    def __init__(self, at_cycle):
+        self.at_cycle = at_cycle
+        self.cycles = 0
+
+    def on_cycle(self, decision, time):
+        self.cycles += 1
+        if self.cycles == self.at_cycle:
+            raise KeyboardInterrupt
+
+
+def test_interrupted_run_leaves_a_recording_and_a_failed_index_row(tmp_path):
+    from mujoco_world.cli_recording import recording_observer
+    from mujoco_world.run_index import read_index
+
+    scenario = dataclasses.replace(get_scenario("tailgater_sudden_stop"), duration=4.0)
+    recorded = recording_observer(tmp_path / "cut-run", out_root=tmp_path)
+    with pytest.raises(KeyboardInterrupt):
+        run_scenario(scenario, "ethical", 0, observer=ObserverGroup([recorded, Interrupt(5)]))
+    (row,) = read_index(tmp_path)
+    assert row.outcome == "failed" and row.run_id == "cut-run"
+    times, _ = column(read_chunks(row.recording)["/world/ego"], "Boxes3D:centers")
+    assert 0.3 <= times.max() < 1.0  # what happened up to the interrupt, no more
