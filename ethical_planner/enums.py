@@ -1,11 +1,11 @@
-"""Parsing of string enums with an error that lists what is allowed."""
+"""Parsing of enums with an error that lists what is allowed (shared by every layer)."""
 
 from __future__ import annotations
 
-from enum import StrEnum
+from enum import Enum
 from typing import TypeVar
 
-E = TypeVar("E", bound=StrEnum)
+E = TypeVar("E", bound=Enum)
 
 
 def parse_enum(kind: type[E], value: str | E, what: str) -> E:
@@ -17,5 +17,5 @@ def parse_enum(kind: type[E], value: str | E, what: str) -> E:
     try:
         return kind(value)
     except ValueError:
-        allowed = ", ".join(member.value for member in kind)
+        allowed = ", ".join(str(member.value) for member in kind)
         raise ValueError(f"unknown {what} {value!r}; allowed: {allowed}") from None

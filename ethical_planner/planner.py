@@ -265,10 +265,8 @@ class Planner:
             ],
             axis=1,
         )
-        counted = np.concatenate(
-            [counted_p.any(axis=2), counted_p.any(axis=2), risk.outside_road.any(axis=1)[:, None]],
-            axis=1,
-        )
+        counted_pair = counted_p.any(axis=2)  # the same collisions count for both bodies
+        counted = np.concatenate([counted_pair, counted_pair, risk.outside_road.any(axis=1)[:, None]], axis=1)
         costs = total_cost(
             risks,
             r,

@@ -18,6 +18,8 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from ethical_planner.enums import parse_enum as shared_parse_enum
+
 T = TypeVar("T")
 
 
@@ -55,10 +57,9 @@ def check_non_negative(owner: str, **values: float | None) -> None:
 def parse_enum(enum_type: type[enum.Enum], owner: str, name: str, value: Any) -> Any:
     """Return ``enum_type(value)`` or raise a ValueError naming the field and the allowed values."""
     try:
-        return enum_type(value)
-    except ValueError:
-        allowed = ", ".join(str(e.value) for e in enum_type)
-        raise ValueError(f"{owner}.{name}: unknown value {value!r}; allowed: {allowed}") from None
+        return shared_parse_enum(enum_type, value, "value")
+    except ValueError as error:
+        raise ValueError(f"{owner}.{name}: {error}") from None
 
 
 def knots(owner: str, name: str, value: Any) -> tuple[tuple[float, float], ...]:
