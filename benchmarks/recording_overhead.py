@@ -12,9 +12,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from mujoco_world.catalog import get_scenario
-from mujoco_world.recording import RecorderConfig, RerunRecorder
-from mujoco_world.runner import run_scenario
+from mujoco_world.loop.runner import run_scenario
+from mujoco_world.scenario.catalog import get_scenario
+from mujoco_world.storage.recording import RecorderConfig, RerunRecorder
 
 CONFIGS = {
     "no recorder": None,

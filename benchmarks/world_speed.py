@@ -21,12 +21,12 @@ import time
 
 import numpy as np
 
-from ethical_planner.allocator import keep_freed_memory
 from ethical_planner.config import preset
-from mujoco_world.catalog import get_scenario
-from mujoco_world.control import TrajectoryReference
-from mujoco_world.runner import RunConfig, run_scenario
-from mujoco_world.world import World
+from harm_calibration.cli.process import keep_freed_memory
+from mujoco_world.loop.runner import RunConfig, run_scenario
+from mujoco_world.loop.world import World
+from mujoco_world.physics.control import TrajectoryReference
+from mujoco_world.scenario.catalog import get_scenario
 
 
 def closed_loop(duration: float, replan_rate: float) -> dict[str, float]:

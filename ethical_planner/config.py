@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .harm import HarmModel
+from ethical_planner.harm import HarmModel
 
 
 def _check(condition: bool, message: str) -> None:
@@ -111,7 +111,10 @@ class PredictionConfig:
     sigma_long(t) = sigma0_long + (growth_long + growth_long_per_speed * v) t,
     sigma_lat(t) = sigma0_lat + growth_lat t; pedestrians use ``pedestrian_growth`` in
     both directions. Eigenvalues below ``covariance_floor`` [m^2] are raised to it.
+    ``model`` names the predictor in ``ethical_planner.prediction.PREDICTORS``.
     """
+
+    model: str = "constant_turn_rate"
 
     sigma0_long: float = 0.3
     sigma0_lat: float = 0.2
@@ -124,9 +127,10 @@ class PredictionConfig:
 
     def __post_init__(self) -> None:
         _finite("prediction", self)
+        _check(isinstance(self.model, str) and bool(self.model), "prediction.model must name a predictor")
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if not isinstance(value, bool):
+            if not isinstance(value, bool | str):
                 _check(value >= 0, f"prediction.{f.name} must be >= 0, got {value}")
         _check(self.covariance_floor > 0, "prediction.covariance_floor must be > 0 m^2")
 

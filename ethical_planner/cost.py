@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import CostWeights
-from .validity import Validity
+from ethical_planner.config import CostWeights
+from ethical_planner.validity import Validity
 
 
 @dataclass(frozen=True, slots=True, eq=False)

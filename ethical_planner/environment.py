@@ -9,7 +9,7 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, Polygon
 
-from .reference_path import ReferencePath
+from ethical_planner.reference_path import ReferencePath
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -28,8 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import expit
 
-from .dv_correction import DeltaVCorrection, impact_offset_fraction, velocity_angle
-from .enums import parse_enum
+from ethical_planner.dv_correction import DeltaVCorrection, impact_offset_fraction, velocity_angle
+from ethical_planner.enums import parse_enum
 
 _TWO_PI = 2.0 * math.pi
 

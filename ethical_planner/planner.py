@@ -15,16 +15,16 @@ from typing import Any
 
 import numpy as np
 
-from .config import PlannerConfig
-from .cost import CostBreakdown, total_cost
-from .dv_correction import DeltaVCorrection
-from .environment import RoadEnvironment
-from .prediction import Prediction, predict_constant_turn_rate
-from .responsibility import LegalCorridors, responsibilities
-from .risk import RiskAssessment, assess_risk
-from .road_users import EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser, RoadUserType, Shape
-from .sampling import Candidates, emergency_braking, frenet_state, sample_candidates
-from .validity import Validity, physically_invalid, validity_levels
+from ethical_planner.config import PlannerConfig
+from ethical_planner.cost import CostBreakdown, total_cost
+from ethical_planner.dv_correction import DeltaVCorrection
+from ethical_planner.environment import RoadEnvironment
+from ethical_planner.prediction import Prediction, predict_constant_turn_rate
+from ethical_planner.responsibility import LegalCorridors, responsibilities
+from ethical_planner.risk import RiskAssessment, assess_risk
+from ethical_planner.road_users import EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser, RoadUserType, Shape
+from ethical_planner.sampling import Candidates, emergency_braking, frenet_state, sample_candidates
+from ethical_planner.validity import Validity, physically_invalid, validity_levels
 
 
 @dataclass(frozen=True, slots=True, eq=False)

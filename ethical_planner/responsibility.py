@@ -20,12 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import ResponsibilityConfig
-from .environment import RoadEnvironment
-from .harm import impact_angles
-from .prediction import Prediction
-from .road_users import LegalCorridor, RoadUser, RoadUserType
-from .sampling import Candidates
+from ethical_planner.config import ResponsibilityConfig
+from ethical_planner.environment import RoadEnvironment
+from ethical_planner.harm import impact_angles
+from ethical_planner.prediction.base import Prediction
+from ethical_planner.road_users import LegalCorridor, RoadUser, RoadUserType
+from ethical_planner.sampling import Candidates
 
 _FRONT = np.pi / 4
 #: Slack of the legal-set test [m], so that rounding never makes a legal road user responsible.

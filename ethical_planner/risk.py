@@ -12,14 +12,14 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from .collision_probability import _parallel_for, _submit, _threads, collision_probability
-from .config import RiskConfig
-from .dv_correction import DeltaVCorrection
-from .environment import RoadEnvironment
-from .harm import HarmModel, boundary_harm, collision_harm
-from .prediction import Prediction
-from .road_users import Shape
-from .sampling import Candidates
+from ethical_planner.collision_probability import _parallel_for, _submit, _threads, collision_probability
+from ethical_planner.config import RiskConfig
+from ethical_planner.dv_correction import DeltaVCorrection
+from ethical_planner.environment import RoadEnvironment
+from ethical_planner.harm import HarmModel, boundary_harm, collision_harm
+from ethical_planner.prediction.base import Prediction
+from ethical_planner.road_users import Shape
+from ethical_planner.sampling import Candidates
 
 
 @dataclass(frozen=True, slots=True, eq=False)

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import SamplingConfig
-from .reference_path import ReferencePath
-from .road_users import KinematicState
+from ethical_planner.config import SamplingConfig
+from ethical_planner.reference_path import ReferencePath
+from ethical_planner.road_users import KinematicState
 
 
 @dataclass(frozen=True, slots=True, eq=False)

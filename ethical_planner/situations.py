@@ -9,8 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .environment import RoadEnvironment
-from .road_users import DEFAULT_SHAPES, KinematicState, RoadUser, RoadUserType
+from ethical_planner.environment import RoadEnvironment
+from ethical_planner.road_users import DEFAULT_SHAPES, KinematicState, RoadUser, RoadUserType
 
 
 @dataclass(frozen=True, slots=True)

@@ -6,8 +6,8 @@ from enum import IntEnum
 
 import numpy as np
 
-from .config import VehicleLimits
-from .sampling import Candidates
+from ethical_planner.config import VehicleLimits
+from ethical_planner.sampling import Candidates
 
 #: A small negative Frenet speed tolerated before a candidate counts as reversing [m/s].
 _REVERSE_TOLERANCE = 0.05

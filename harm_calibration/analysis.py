@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .calibration import (
+from harm_calibration.calibration import (
     MIN_DV_MS,
     CalibrationResult,
     DeltaVCorrection,
@@ -26,9 +26,9 @@ from .calibration import (
     error_stats,
     row_offset_fractions,
 )
-from .geometry import CLASSES
-from .literature import literature_markdown, literature_table
-from .rows import Row, column
+from harm_calibration.geometry import CLASSES
+from harm_calibration.literature import literature_markdown, literature_table
+from harm_calibration.rows import Row, column
 
 AREAS = ("front", "driver_side", "right_side", "rear")
 MEASURED_STATUS = ("ok", "incomplete")

@@ -34,8 +34,7 @@ from ethical_planner.dv_correction import (
     impact_offset_fraction,
 )
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, RoadUserType
-
-from .geometry import Footprint, launch_geometry
+from harm_calibration.geometry import Footprint, launch_geometry
 
 #: Impacts with an Eq. 1 delta-v below this are left out of fits and errors [m/s].
 MIN_DV_MS = 0.05

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .rows import Row, row_from_record
+from harm_calibration.rows import Row, row_from_record
 
 
 def find_summaries(root: Path) -> list[Path]:

@@ -17,8 +17,7 @@ from typing import Any
 import numpy as np
 
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, RoadUserType
-
-from .geometry import STATIC, Footprint, classify, offset_fraction
+from harm_calibration.geometry import STATIC, Footprint, classify, offset_fraction
 
 #: Identification and design columns (sweep design values; derived for runs).
 KEY_COLUMNS = (

@@ -21,13 +21,12 @@ from enum import StrEnum
 from pathlib import Path
 
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUserType
-from mujoco_world.compare import compare_impact
-from mujoco_world.impact import ImpactRig
-from mujoco_world.scenario import ContactSpec, RestitutionSpec
-from mujoco_world.scene import BodyProxy
-
-from .geometry import Footprint, classify, launch_geometry, speeds_for_closing
-from .rows import COLUMNS, Row, read_rows, row_from_record, write_rows
+from harm_calibration.geometry import Footprint, classify, launch_geometry, speeds_for_closing
+from harm_calibration.rows import COLUMNS, Row, read_rows, row_from_record, write_rows
+from mujoco_world.evaluation.compare import compare_impact
+from mujoco_world.physics.impact import ImpactRig
+from mujoco_world.physics.scene import BodyProxy
+from mujoco_world.scenario.spec import ContactSpec, RestitutionSpec
 
 #: Partner types of the sweep (car-cyclist is the bicycle type).
 PARTNERS = ("car", "truck", "bus", "motorcycle", "bicycle", "pedestrian")

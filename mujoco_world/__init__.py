@@ -1,30 +1,39 @@
 """Closed-loop MuJoCo world in which the ethical planner drives an ego body.
 
-Layers (each module imports only those above it in this list):
+Grouped by concern (each group imports only those before it in this list):
 
-* ``scenario``: frozen scenario records, TOML loading (``load_scenario``).
-* ``road``: road geometry, routes, walls and kerbs.
-* ``scene``: the MuJoCo model of planar body proxies (``Scene``, ``BodyProxy``).
-* ``impact``: impact measurement from contact forces (``ImpactRecorder``,
-  ``ImpactRig``, ``measure_impact``, ``ImpactMeasurement``), usable without a planner.
-* ``compare``: the harm model's prediction beside a measurement (``compare_impact``).
-* ``control``, ``behaviour``: tracking controllers and road-user behaviours.
-* ``world``: one scenario in MuJoCo (``World``).
-* ``runner``: the closed loop with the planner (``run_scenario``, ``RunObserver``).
-* ``catalog``: named classic scenarios and a seeded random generator.
-* ``batch``, ``cli``: multi-process batches (``etp demo``) and the ``etp`` subcommands.
+* ``scenario``: what to simulate: frozen scenario records, TOML loading, road
+  geometry, the catalog.
+* ``physics``: the MuJoCo scene, impact measurement, force controllers.
+* ``agents``: behaviours of the other road users.
+* ``evaluation``: measured impacts against the harm model's prediction.
+* ``loop``: one world, the closed loop with a planner, batches of runs.
+* ``storage``: Rerun recordings, the run index, run folders.
 
-This package never imports ``rerun`` or ``harm_calibration``.
+This package never imports ``harm_calibration``; only ``storage.recording`` imports
+``rerun``.
 """
 
-from .catalog import CATALOG, catalog_names, generate_scenarios, get_scenario, random_scenario
-from .compare import BodyComparison, ImpactRecord, compare_impact
-from .control import ControlConfig
-from .impact import BodyImpact, ImpactMeasurement, ImpactRecorder, ImpactRig, measure_impact
-from .runner import RunConfig, RunObserver, RunSummary, run_scenario
-from .scenario import Scenario, load_scenario, scenario_from_dict
-from .scene import BodyProxy, Scene
-from .world import ObservationNoise, World
+from mujoco_world.evaluation.compare import BodyComparison, ImpactRecord, compare_impact
+from mujoco_world.loop.runner import RunConfig, RunObserver, RunSummary, run_scenario
+from mujoco_world.loop.world import ObservationNoise, World
+from mujoco_world.physics.control import ControlConfig
+from mujoco_world.physics.impact import (
+    BodyImpact,
+    ImpactMeasurement,
+    ImpactRecorder,
+    ImpactRig,
+    measure_impact,
+)
+from mujoco_world.physics.scene import BodyProxy, Scene
+from mujoco_world.scenario.catalog import (
+    CATALOG,
+    catalog_names,
+    generate_scenarios,
+    get_scenario,
+    random_scenario,
+)
+from mujoco_world.scenario.spec import Scenario, load_scenario, scenario_from_dict
 
 __all__ = [
     "CATALOG",

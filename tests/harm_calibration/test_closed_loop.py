@@ -6,8 +6,8 @@ import pytest
 from ethical_planner.road_users import KinematicState
 from harm_calibration.cli import main
 from harm_calibration.closed_loop import rows_from_runs
-from mujoco_world.compare import compare_impact
-from mujoco_world.impact import measure_impact
+from mujoco_world.evaluation.compare import compare_impact
+from mujoco_world.physics.impact import measure_impact
 
 
 def _record(angle: float, dy: float) -> dict:

@@ -1,0 +1,29 @@
+"""Prediction of other road users: the ``Predictor`` protocol and its implementations.
+
+``base`` holds the ``Prediction`` record, the protocol and the ``PREDICTORS`` registry;
+each implementation is one module that registers itself on import.
+"""
+
+from ethical_planner.prediction import constant_turn_rate
+from ethical_planner.prediction.base import (
+    PREDICTORS,
+    Prediction,
+    Predictor,
+    empty_prediction,
+    make_predictor,
+)
+from ethical_planner.prediction.constant_turn_rate import (
+    ConstantTurnRatePredictor,
+    predict_constant_turn_rate,
+)
+
+__all__ = [
+    "PREDICTORS",
+    "ConstantTurnRatePredictor",
+    "Prediction",
+    "Predictor",
+    "constant_turn_rate",
+    "empty_prediction",
+    "make_predictor",
+    "predict_constant_turn_rate",
+]

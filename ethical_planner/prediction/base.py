@@ -1,0 +1,168 @@
+"""Predictions as a struct of arrays, and the predictor protocol every predictor follows.
+
+The paper's planner takes its predictions from a learned network (WaleNet) that outputs
+a bivariate normal per future step. Here any object with ``predict(road_users, times)``
+returning a ``Prediction`` can stand in its place: the planner and the world take a
+``Predictor``, never a particular function. Predictors are registered by name in
+``PREDICTORS`` (``[prediction] model = "..."`` in a planner TOML file).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from ethical_planner.config import PredictionConfig
+from ethical_planner.registry import Registry
+from ethical_planner.road_users import MOTORISED_TYPES, VULNERABLE_TYPES, RoadUser, RoadUserType
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Prediction:
+    """Predicted Gaussian positions of every other road user over the horizon.
+
+    Attributes:
+        ids: road-user ids, shape (n_obs,).
+        types: road-user types, length n_obs.
+        mean: predicted centre [m], shape (n_obs, n_t, 2).
+        cov: position covariance [m^2], shape (n_obs, n_t, 2, 2), symmetric PSD.
+        heading: [rad], shape (n_obs, n_t).
+        speed: [m/s], shape (n_obs, n_t).
+        length, width: footprint [m], shape (n_obs,).
+        mass: [kg], shape (n_obs,).
+    """
+
+    ids: np.ndarray
+    types: tuple[RoadUserType, ...]
+    mean: np.ndarray
+    cov: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    mass: np.ndarray
+
+    def __post_init__(self) -> None:
+        n_obs = len(self.types)
+        n_t = self.mean.shape[1] if self.mean.ndim == 3 else -1
+        expected = {
+            "ids": (n_obs,),
+            "mean": (n_obs, n_t, 2),
+            "cov": (n_obs, n_t, 2, 2),
+            "heading": (n_obs, n_t),
+            "speed": (n_obs, n_t),
+            "length": (n_obs,),
+            "width": (n_obs,),
+            "mass": (n_obs,),
+        }
+        for name, shape in expected.items():
+            value = np.asarray(getattr(self, name))
+            if value.shape != shape:
+                raise ValueError(f"Prediction.{name} must have shape {shape}, got {value.shape}")
+            if name != "ids" and not np.all(np.isfinite(value)):
+                raise ValueError(f"Prediction.{name} must be finite (found NaN or inf)")
+        for name in ("length", "width", "mass"):
+            if np.any(np.asarray(getattr(self, name)) <= 0):
+                raise ValueError(f"Prediction.{name} must be > 0 for every road user")
+        if n_obs:
+            asym = np.abs(self.cov - np.swapaxes(self.cov, -1, -2)).max()
+            if asym > 1e-9 * max(1.0, np.abs(self.cov).max()):
+                raise ValueError("Prediction.cov must be symmetric")
+            eig_min = np.linalg.eigvalsh(self.cov)[..., 0]
+            bad = np.argwhere(eig_min < -1e-9)
+            if len(bad):
+                k, t = bad[0]
+                raise ValueError(
+                    f"Prediction.cov of road user {self.ids[k]} at step {t} is not positive "
+                    f"semidefinite (smallest eigenvalue {eig_min[k, t]:.3g} m^2)"
+                )
+
+    @property
+    def n_obs(self) -> int:
+        """Number of predicted road users."""
+        return len(self.types)
+
+    @property
+    def vulnerable(self) -> np.ndarray:
+        """True for vulnerable road users, shape (n_obs,)."""
+        return np.array([t in VULNERABLE_TYPES for t in self.types], dtype=bool)
+
+    @property
+    def motorised(self) -> np.ndarray:
+        """True for motorised road users, shape (n_obs,)."""
+        return np.array([t in MOTORISED_TYPES for t in self.types], dtype=bool)
+
+    def with_covariance_floor(self, floor: float) -> Prediction:
+        """Return a copy whose covariance eigenvalues are at least ``floor`` [m^2].
+
+        A zero or degenerate covariance would make the collision probability a
+        step function; the reference uses 0.1 I for ground-truth predictions.
+        """
+        if self.n_obs == 0:
+            return self
+        eigval, eigvec = np.linalg.eigh(self.cov)
+        eigval = np.maximum(eigval, floor)
+        cov = np.einsum("...ij,...j,...kj->...ik", eigvec, eigval, eigvec)
+        return Prediction(
+            self.ids,
+            self.types,
+            self.mean,
+            cov,
+            self.heading,
+            self.speed,
+            self.length,
+            self.width,
+            self.mass,
+        )
+
+
+@runtime_checkable
+class Predictor(Protocol):
+    """Road users and prediction times in, a ``Prediction`` out.
+
+    ``times`` are seconds from now, shape (n_t,), ``times[0] = 0``; the prediction
+    covers the road users in the order given (``Prediction.ids`` equal their ids).
+    A predictor may keep state between calls (a learned one keeps histories), but it
+    must not change its arguments.
+    """
+
+    name: str
+
+    def predict(self, road_users: Sequence[RoadUser], times: np.ndarray) -> Prediction:
+        """Predict every road user at ``times`` [s]."""
+        ...
+
+
+#: Predictor factories by name: ``factory(config) -> Predictor``.
+PREDICTORS: Registry[Callable[[PredictionConfig], Predictor]] = Registry("predictor")
+
+
+def make_predictor(config: PredictionConfig) -> Predictor:
+    """The predictor named by ``config.model``, built with ``config``.
+
+    Raises:
+        ValueError: an unknown model; the message lists the registered ones.
+    """
+    # Importing the package registers the built-in predictors.
+    import ethical_planner.prediction  # noqa: F401
+
+    return PREDICTORS.get(config.model)(config)
+
+
+def empty_prediction(n_t: int) -> Prediction:
+    """A prediction of no road users over ``n_t`` steps."""
+    empty = np.zeros((0, n_t))
+    return Prediction(
+        np.zeros(0, dtype=int),
+        (),
+        np.zeros((0, n_t, 2)),
+        np.zeros((0, n_t, 2, 2)),
+        empty,
+        empty.copy(),
+        np.zeros(0),
+        np.zeros(0),
+        np.zeros(0),
+    )

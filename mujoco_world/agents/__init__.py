@@ -1,0 +1,2 @@
+"""Agents: the behaviours of the other road users (scripted, car following, crossing
+pedestrians, rule violators)."""

@@ -1,0 +1,381 @@
+"""Behaviour of the road users: scripted, car following (IDM), crossing pedestrians, parked.
+
+Every road user follows its route with an *intended* longitudinal state (arc length
+``s`` [m], speed ``v`` [m/s]) and a lateral offset ``d`` [m] from the route. The
+behaviours decide an acceleration and a lateral motion at a behaviour rate (default
+20 Hz, ``tick``); the intended state is integrated every physics step, vectorised
+over all road users, and turned into position, velocity and acceleration references
+for the tracking controller (``Fleet.references``). The bodies are physical, so they
+lag their references slightly and respond to impacts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ethical_planner.reference_path import ReferencePath
+from ethical_planner.road_users import LegalCorridor, RoadUserType
+from mujoco_world.scenario.spec import BehaviourKind, RoadUserSpec
+
+#: Resampling step of the routes [m].
+ROUTE_STEP_M = 0.25
+#: Straight continuation of every route beyond its end [m].
+ROUTE_EXTENSION_M = 300.0
+#: Largest acceleration magnitude a scripted profile may command [m/s^2].
+SCRIPTED_ACCEL_LIMIT = 10.0
+
+
+def smoothstep_profile(knots: Sequence[tuple[float, float]], t: float) -> tuple[float, float, float]:
+    """Value, first and second time derivative of a knot profile at ``t``.
+
+    Between knots the value follows a quintic smoothstep (zero velocity and
+    acceleration at the knots); before the first knot it is 0 (moving to the first
+    value), after the last it holds.
+
+    Args:
+        knots: (time [s], value) pairs, strictly increasing times.
+        t: time [s].
+    """
+    if not knots:
+        return 0.0, 0.0, 0.0
+    pts = [(0.0, 0.0), *knots] if knots[0][0] > 0 else list(knots)
+    if t <= pts[0][0]:
+        return pts[0][1], 0.0, 0.0
+    for (t0, v0), (t1, v1) in zip(pts[:-1], pts[1:], strict=True):
+        if t <= t1:
+            h = t1 - t0
+            u = (t - t0) / h
+            dv = v1 - v0
+            value = v0 + dv * (10 * u**3 - 15 * u**4 + 6 * u**5)
+            rate = dv * (30 * u**2 - 60 * u**3 + 30 * u**4) / h
+            accel = dv * (60 * u - 180 * u**2 + 120 * u**3) / (h * h)
+            return value, rate, accel
+    return pts[-1][1], 0.0, 0.0
+
+
+def linear_profile(knots: Sequence[tuple[float, float]], t: float, default: float) -> float:
+    """Piecewise-linear profile value at ``t`` (``default`` without knots; holds at the ends)."""
+    if not knots:
+        return default
+    times = [k[0] for k in knots]
+    values = [k[1] for k in knots]
+    if t <= times[0]:
+        return default if times[0] > 0 else values[0]
+    return float(np.interp(t, times, values))
+
+
+class RouteTable:
+    """Routes of several bodies, resampled by arc length into padded arrays.
+
+    Beyond its end a route continues straight (``ReferencePath`` semantics); before
+    its start it is clamped.
+
+    Attributes:
+        paths: the smoothed ``ReferencePath`` of each route.
+        length: (k,) route lengths [m].
+        x, y, theta, kappa: (k, n) samples every ``ROUTE_STEP_M``.
+    """
+
+    def __init__(self, polylines: Sequence[np.ndarray]) -> None:
+        self.paths = tuple(ReferencePath.from_polyline(p) for p in polylines)
+        self.length = np.array([p.length for p in self.paths])
+        n = int(math.ceil((float(self.length.max(initial=0.0)) + ROUTE_EXTENSION_M) / ROUTE_STEP_M)) + 2
+        s = np.arange(n) * ROUTE_STEP_M
+        k = len(self.paths)
+        self._table = np.zeros((k, n, 4))  # x, y, theta, kappa
+        for i, path in enumerate(self.paths):
+            x, y, theta, kappa, _ = path.evaluate(s)
+            self._table[i] = np.column_stack([x, y, theta, kappa])
+        self.x, self.y, self.theta, self.kappa = (self._table[:, :, j] for j in range(4))
+        self._n = n
+
+    def lookup(self, rows: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Pose of routes ``rows`` at arc lengths ``s`` (same shape, any).
+
+        Returns:
+            (x, y, theta, kappa), each of the shape of ``s``.
+        """
+        u = np.clip(s, 0.0, (self._n - 1.001) * ROUTE_STEP_M) / ROUTE_STEP_M
+        i = u.astype(np.int64)
+        f = (u - i)[..., None]
+        lo = self._table[rows, i]
+        out = lo + f * (self._table[rows, i + 1] - lo)
+        return out[..., 0], out[..., 1], out[..., 2], out[..., 3]
+
+
+@dataclass(frozen=True, slots=True)
+class WorldView:
+    """What a behaviour may look at: the true states of all bodies (entity 0 is the ego).
+
+    Attributes:
+        time: [s].
+        position: (n, 2) [m]. velocity: (n, 2) [m/s]. yaw: (n,) [rad].
+        length: (n,) [m]. width: (n,) [m]. types: road-user types, length n.
+    """
+
+    time: float
+    position: np.ndarray
+    velocity: np.ndarray
+    yaw: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    types: tuple[RoadUserType, ...]
+
+
+class Fleet:
+    """The road users' behaviours and intended states, vectorised.
+
+    Args:
+        specs: road users (entity i + 1 is ``specs[i]``; the ego is entity 0).
+        routes: route polylines in the same order, each (n_i, 2) [m].
+        road_speed_limit: [m/s], for legal corridors without their own limit.
+        tick: behaviour period [s].
+    """
+
+    def __init__(
+        self,
+        specs: Sequence[RoadUserSpec],
+        routes: Sequence[np.ndarray],
+        road_speed_limit: float,
+        tick: float = 0.05,
+    ) -> None:
+        self.specs = tuple(specs)
+        self.k = len(self.specs)
+        self.tick = float(tick)
+        self.road_speed_limit = float(road_speed_limit)
+        self.routes = RouteTable(routes) if self.k else None
+        self.rows = np.arange(self.k)
+        self.s = np.array([u.s0 for u in self.specs], dtype=float)
+        self.v = np.array([u.behaviour.speed for u in self.specs], dtype=float)
+        self.a = np.zeros(self.k)
+        self.d = np.zeros(self.k)
+        self.d_rate = np.zeros(self.k)
+        self.d_accel = np.zeros(self.k)
+        self.activated_at = np.full(self.k, math.inf)
+        self.active = np.ones(self.k, dtype=bool)  # False once crashed
+        self._next_tick = 0.0
+        self._time = 0.0
+        self._crossing = np.zeros(self.k, dtype=bool)
+        self._delay: list[deque[float] | None] = []
+        for u in self.specs:
+            idm = u.behaviour.idm
+            ticks = int(round(idm.reaction_time / self.tick)) if idm is not None else 0
+            self._delay.append(deque([0.0] * ticks) if ticks > 0 else None)
+        self._kind = [u.behaviour.kind for u in self.specs]
+        self._is_idm = np.array([k is BehaviourKind.IDM for k in self._kind], dtype=bool)
+
+    # ------------------------------------------------------------------ states
+
+    def initial_poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(x, y, yaw, speed) of every road user at the start, each (k,)."""
+        if not self.k:
+            empty = np.zeros(0)
+            return empty, empty, empty, empty
+        x, y, theta, _ = self.routes.lookup(self.rows, self.s)
+        return x, y, theta, self.v.copy()
+
+    def references(self, time: float) -> tuple[np.ndarray, ...]:
+        """Advance the intended states to ``time`` [s] and return controller references.
+
+        Returns:
+            (p_ref (k, 2), v_ref (k, 2), a_ref (k, 2), yaw_ref (k,), yaw_rate_ref (k,)).
+        """
+        dt = time - self._time
+        self._time = time
+        a = np.where((self.v > 0.0) | (self.a > 0.0), self.a, 0.0)
+        v_new = np.maximum(self.v + a * dt, 0.0)
+        self.s = self.s + 0.5 * (self.v + v_new) * dt
+        self.v = v_new
+        self.d = self.d + self.d_rate * dt
+        x, y, theta, kappa = self.routes.lookup(self.rows, self.s)
+        c, s = np.cos(theta), np.sin(theta)
+        p = np.column_stack([x - self.d * s, y + self.d * c])
+        v = self.v
+        vel = np.column_stack([v * c - self.d_rate * s, v * s + self.d_rate * c])
+        lat = v * v * kappa + self.d_accel
+        acc = np.column_stack([a * c - lat * s, a * s + lat * c])
+        yaw = theta + np.arctan2(self.d_rate, np.maximum(v, 0.5))
+        return p, vel, acc, yaw, v * kappa
+
+    def deactivate(self, mask: np.ndarray) -> None:
+        """Stop the behaviours of crashed road users (``mask`` (k,) bool)."""
+        self.active &= ~mask
+        self.v[mask] = 0.0
+        self.a[mask] = 0.0
+        self.d_rate[mask] = 0.0
+        self.d_accel[mask] = 0.0
+
+    # ------------------------------------------------------------------ decisions
+
+    def due(self, time: float) -> bool:
+        """True if the behaviours should decide again at ``time`` [s]."""
+        return time >= self._next_tick - 1e-9
+
+    def decide(self, view: WorldView) -> None:
+        """Update accelerations and lateral motions of all active road users."""
+        t = view.time
+        self._next_tick = t + self.tick
+        ego_pos = view.position[0]
+        idm_rows = np.flatnonzero(self._is_idm & self.active)
+        leaders = {}
+        if idm_rows.size:
+            gaps, speeds = self._leaders(idm_rows, view)
+            leaders = {int(i): (float(g), float(v)) for i, g, v in zip(idm_rows, gaps, speeds, strict=True)}
+        for i, spec in enumerate(self.specs):
+            if not self.active[i]:
+                continue
+            b = spec.behaviour
+            if math.isinf(self.activated_at[i]) and t >= b.start_time - 1e-9:
+                trigger = b.trigger_distance
+                me = view.position[i + 1]
+                if trigger is None or math.hypot(*(ego_pos - me)) <= trigger:
+                    self.activated_at[i] = t
+            since = t - self.activated_at[i]
+            kind = self._kind[i]
+            if kind is BehaviourKind.PARKED:
+                self.a[i], self.v[i] = 0.0, 0.0
+                continue
+            if math.isfinite(since) and b.lateral:
+                d_next, _, _ = smoothstep_profile(b.lateral, since + self.tick)
+                _, _, accel = smoothstep_profile(b.lateral, since)
+                self.d_rate[i] = (d_next - self.d[i]) / self.tick
+                self.d_accel[i] = accel
+            if kind is BehaviourKind.SCRIPTED:
+                self.a[i] = self._scripted(i, since)
+            elif kind is BehaviourKind.IDM:
+                self.a[i] = self._idm(i, since, view, *leaders[i])
+            else:
+                self.a[i] = self._pedestrian(i, since, view)
+
+    def _target_speed(self, i: int, since: float) -> float:
+        b = self.specs[i].behaviour
+        if not math.isfinite(since):
+            return b.speed
+        return linear_profile(b.speed_profile, since, b.speed)
+
+    def _scripted(self, i: int, since: float) -> float:
+        target = self._target_speed(i, since + self.tick if math.isfinite(since) else since)
+        return float(np.clip((target - self.v[i]) / self.tick, -SCRIPTED_ACCEL_LIMIT, SCRIPTED_ACCEL_LIMIT))
+
+    def _leaders(self, rows: np.ndarray, view: WorldView) -> tuple[np.ndarray, np.ndarray]:
+        """Gap [m] to and speed [m/s] of the nearest body ahead on the routes of ``rows``.
+
+        Every other body is projected onto the first ``look_ahead`` metres of each
+        route (sampled every metre, refined along the tangent); it leads if it
+        overlaps the route's lane laterally. Vectorised over rows and bodies.
+
+        Returns:
+            (gap, speed), each (m,); inf and 0 where nothing is ahead.
+        """
+        m = len(rows)
+        horizon = max(self.specs[i].behaviour.idm.look_ahead for i in rows)
+        samples = np.arange(0.0, horizon + 1e-9, 1.0)
+        n_s = samples.size
+        x, y, theta, _ = self.routes.lookup(rows[:, None], self.s[rows, None] + samples[None, :])
+        pos = view.position
+        dx = pos[None, :, 0, None] - x[:, None, :]  # (m, n, n_s)
+        dy = pos[None, :, 1, None] - y[:, None, :]
+        nearest = np.argmin(dx * dx + dy * dy, axis=2)  # (m, n)
+        dxn = np.take_along_axis(dx, nearest[..., None], axis=2)[..., 0]
+        dyn = np.take_along_axis(dy, nearest[..., None], axis=2)[..., 0]
+        heading = np.take_along_axis(theta, nearest, axis=1)
+        c, s = np.cos(heading), np.sin(heading)
+        lateral = np.abs(-dxn * s + dyn * c)
+        rel = view.yaw[None, :] - heading
+        length, width = view.length[None, :], view.width[None, :]
+        half_along = 0.5 * (length * np.abs(np.cos(rel)) + width * np.abs(np.sin(rel)))
+        half_across = 0.5 * (length * np.abs(np.sin(rel)) + width * np.abs(np.cos(rel)))
+        me = rows + 1
+        along = samples[nearest] + dxn * c + dyn * s
+        gap = along - 0.5 * view.length[me, None] - half_along
+        limit = np.array([self.specs[i].behaviour.idm.look_ahead for i in rows])
+        valid = (
+            (lateral < 0.5 * view.width[me, None] + half_across + 0.3)
+            & (nearest > 0)
+            & (nearest < n_s - 1)
+            & (samples[nearest] <= limit[:, None])
+        )
+        valid[np.arange(m), me] = False
+        gap = np.where(valid, gap, np.inf)
+        j = np.argmin(gap, axis=1)
+        best = gap[np.arange(m), j]
+        vel = view.velocity[j]
+        hj = heading[np.arange(m), j]
+        speed = np.where(np.isfinite(best), vel[:, 0] * np.cos(hj) + vel[:, 1] * np.sin(hj), 0.0)
+        return best, speed
+
+    def _idm(self, i: int, since: float, view: WorldView, gap: float, v_lead: float) -> float:
+        spec = self.specs[i]
+        p = spec.behaviour.idm
+        v = float(self.v[i])
+        v0 = max(self._target_speed(i, since), 0.1)
+        if p.stop_at is not None and view.time < p.stop_until:
+            line_gap = p.stop_at - self.s[i] - 0.5 * view.length[i + 1]
+            if line_gap > v * v / (2.0 * p.max_deceleration) - 0.5 and line_gap < gap:
+                gap, v_lead = max(line_gap, 0.0), 0.0
+        free = 1.0 - (v / v0) ** 4
+        if math.isfinite(gap):
+            brake_term = v * (v - v_lead) / (2.0 * math.sqrt(p.max_acceleration * p.comfort_deceleration))
+            s_star = p.min_gap + max(0.0, v * p.time_headway + brake_term)
+            acc = p.max_acceleration * (free - (s_star / max(gap, 0.1)) ** 2)
+        else:
+            acc = p.max_acceleration * free
+        acc = float(np.clip(acc, -p.max_deceleration, p.max_acceleration))
+        queue = self._delay[i]
+        if queue is not None:
+            queue.append(acc)
+            acc = queue.popleft()
+        return acc
+
+    def _pedestrian(self, i: int, since: float, view: WorldView) -> float:
+        spec = self.specs[i]
+        crossing = spec.behaviour.crossing
+        v, s = float(self.v[i]), float(self.s[i])
+        speed = self._target_speed(i, since)
+        if not self._crossing[i] and s < crossing.wait_at + 0.05:
+            if self._gap_clear(i, view, crossing.gap_time, crossing.corridor) and s >= crossing.wait_at - 0.3:
+                self._crossing[i] = True
+            else:
+                remaining = max(crossing.wait_at - s, 0.0)
+                speed = min(speed, math.sqrt(2.0 * 1.0 * remaining))
+        elif not self._crossing[i]:
+            self._crossing[i] = True
+        return float(np.clip((speed - v) / self.tick, -3.0, 1.5))
+
+    def _gap_clear(self, i: int, view: WorldView, gap_time: float, corridor: float) -> bool:
+        me = i + 1
+        pos = view.position
+        rel = pos[me] - pos
+        c, s = np.cos(view.yaw), np.sin(view.yaw)
+        along = rel[:, 0] * c + rel[:, 1] * s
+        across = -rel[:, 0] * s + rel[:, 1] * c
+        speed = view.velocity[:, 0] * c + view.velocity[:, 1] * s
+        vehicle = np.array([t is not RoadUserType.PEDESTRIAN for t in view.types])
+        vehicle[me] = False
+        approaching = vehicle & (speed > 0.5) & (along > -0.5 * view.length) & (np.abs(across) < corridor)
+        time_to_arrive = (along - 0.5 * view.length) / np.maximum(speed, 0.5)
+        return not bool(np.any(approaching & (time_to_arrive < gap_time)))
+
+    # ------------------------------------------------------------------ legal corridors
+
+    def legal_corridors(self, time: float) -> list[LegalCorridor | None]:
+        """Legal corridor of every road user for the planner (None where not given)."""
+        out: list[LegalCorridor | None] = []
+        for i, spec in enumerate(self.specs):
+            legal = spec.legal
+            if legal is None:
+                out.append(None)
+                continue
+            stop = None
+            if legal.stop_line is not None and time < legal.stop_until:
+                stop = float(legal.stop_line - self.s[i])
+                if stop < -0.5 * (spec.shape[0]):
+                    stop = None  # already past the line
+            limit = legal.speed_limit if legal.speed_limit is not None else self.road_speed_limit
+            out.append(LegalCorridor(limit, legal.lateral_half_width, stop))
+        return out

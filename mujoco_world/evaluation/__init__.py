@@ -1,0 +1,1 @@
+"""Evaluation: a measured impact held against the harm model's prediction (``compare``)."""

@@ -1,0 +1,2 @@
+"""The closed loop: one scenario in MuJoCo (``world``), the run loop with the planner
+(``runner``) and batches of runs on several processes (``batch``)."""

@@ -1,0 +1,464 @@
+"""The physical world of one scenario: road, bodies, controllers, behaviours, impacts.
+
+``World`` owns the MuJoCo scene and advances it one physics step at a time
+(``step``). It knows nothing of the planner: the closed loop (``runner``) hands it the
+ego's planned trajectory (``set_ego_plan``) and asks it for observations
+(``observe``). Entity 0 is the ego, entity i >= 1 is ``scenario.road_users[i - 1]``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from ethical_planner.environment import RoadEnvironment
+from ethical_planner.reference_path import ReferencePath
+from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, RoadUser, Shape
+from mujoco_world.agents.behaviour import Fleet, WorldView
+from mujoco_world.physics.control import ControlConfig, TrajectoryReference, brake_forces, tracking_forces
+from mujoco_world.physics.impact import ImpactMeasurement, ImpactRecorder
+from mujoco_world.physics.scene import NO_ENTITY, BodyProxy, Scene
+from mujoco_world.scenario.fields import check_non_negative
+from mujoco_world.scenario.road import build_road
+from mujoco_world.scenario.spec import RoadName, RouteSpec, Scenario
+
+
+@dataclass(frozen=True, slots=True)
+class ObservationNoise:
+    """Gaussian noise on what the planner observes (standard deviations).
+
+    Attributes:
+        position: [m]. velocity: along the heading [m/s]. yaw: [rad].
+        ego_position: noise on the ego's own localisation [m].
+    """
+
+    position: float = 0.0
+    velocity: float = 0.0
+    yaw: float = 0.0
+    ego_position: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_non_negative(
+            "noise",
+            position=self.position,
+            velocity=self.velocity,
+            yaw=self.yaw,
+            ego_position=self.ego_position,
+        )
+
+    @property
+    def enabled(self) -> bool:
+        """True if any standard deviation is positive."""
+        return max(self.position, self.velocity, self.yaw, self.ego_position) > 0
+
+
+class World:
+    """A scenario built in MuJoCo, stepped with controllers and behaviours.
+
+    Args:
+        scenario: what to build.
+        control: tracking controller gains and limits.
+        behaviour_tick: period of the road users' decisions [s].
+        timestep: physics step [s].
+        control_interval: physics steps between controller updates (held in between).
+
+    Raises:
+        ValueError: the scenario places bodies overlapping at the start or routes
+            are degenerate.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        control: ControlConfig | None = None,
+        behaviour_tick: float = 0.05,
+        timestep: float = 0.001,
+        control_interval: int = 10,
+    ) -> None:
+        if not (isinstance(control_interval, int) and control_interval >= 1):
+            raise ValueError(f"control_interval must be an integer >= 1, got {control_interval!r}")
+        self.scenario = scenario
+        self.control = control or ControlConfig()
+        self.road = build_road(scenario.road)
+        ego = scenario.ego
+        ego_route = self.road.route(RouteSpec(road=RoadName.MAIN, lane=ego.lane, turn=ego.turn))
+        self.ego_path = ReferencePath.from_polyline(ego_route)
+        self.goal_s = ego.goal_s if ego.goal_s is not None else self.ego_path.length - 20.0
+        users = scenario.road_users
+        routes = [self.road.route(u.route) for u in users]
+        self.fleet = Fleet(users, routes, scenario.road.speed_limit, behaviour_tick)
+        proxies = [BodyProxy("ego", ego.type, ego.length, ego.width, ego.mass)]
+        proxies += [BodyProxy.of_type(u.name, u.type, *u.shape, u.mass) for u in users]
+        self.scene = Scene(proxies, self.road.static_boxes(), scenario.contact, timestep)
+        self.recorder = ImpactRecorder(self.scene)
+        self.lengths = np.array([p.length for p in proxies])
+        self.widths = np.array([p.width for p in proxies])
+        self.types = tuple(p.type for p in proxies)
+        self.n = len(proxies)
+        x0, y0, th0, _, _ = self.ego_path.evaluate(np.array([ego.s0]))
+        ux, uy, uyaw, uv = self.fleet.initial_poses()
+        x = np.concatenate([x0, ux])
+        y = np.concatenate([y0, uy])
+        yaw = np.concatenate([th0, uyaw])
+        v = np.concatenate([[ego.speed], uv])
+        self.scene.set_states(x, y, yaw, v * np.cos(yaw), v * np.sin(yaw))
+        self._check_no_overlap()
+        # The ego keeps its lane at constant speed until the first plan arrives.
+        s_grid = ego.s0 + np.arange(0.0, 3.01, 0.1) * ego.speed
+        px, py, pth, pk, _ = self.ego_path.evaluate(s_grid)
+        n_grid = len(s_grid)
+        self.ego_plan = TrajectoryReference(
+            0.0,
+            np.arange(n_grid) * 0.1,
+            px,
+            py,
+            pth,
+            np.full(n_grid, ego.speed),
+            np.zeros(n_grid),
+            pk,
+        )
+        self.crashed = np.zeros(self.n, dtype=bool)
+        self.ego_crash_time: float | None = None
+        self._track_sq = 0.0
+        self._track_max = 0.0
+        self._track_n = 0
+        self._dist_buf = np.zeros(6)
+        # Geoms of road users, for distance queries from the ego.
+        self._other_geoms = self.scene.geom_ids[1:]
+        self._occluders = np.array([t not in VULNERABLE_TYPES for t in self.types])
+        self._occluders[0] = False
+        #: Wall-clock seconds spent in mj_step, in controllers and behaviours, in measurement.
+        self.timing = {"mj_step": 0.0, "control": 0.0, "measurement": 0.0}
+        self.control_interval = int(control_interval)
+        self._control_countdown = 0
+        self._any_crashed = False
+        n = self.n
+        self._p_ref, self._v_ref, self._a_ref = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
+        self._yaw_ref, self._rate_ref = np.zeros(n), np.zeros(n)
+
+    # ------------------------------------------------------------------ setup
+
+    def _check_no_overlap(self) -> None:
+        data = self.scene.data
+        if not data.ncon:
+            return
+        entity = self.scene.geom_entity
+        e1 = entity[data.contact.geom1]
+        e2 = entity[data.contact.geom2]
+        bad = (e1 != NO_ENTITY) & (e2 != NO_ENTITY) & (e1 != e2) & (data.contact.dist < -1e-6)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            names = [self._entity_name(int(e)) for e in (e1[i], e2[i])]
+            raise ValueError(
+                f"scenario {self.scenario.name!r}: {names[0]} and {names[1]} overlap at the start"
+            )
+
+    def _entity_name(self, entity: int) -> str:
+        return self.scene.names[entity] if entity >= 0 else f"a {self.scene.static_kind}"
+
+    def environment(self) -> RoadEnvironment:
+        """The road as the planner sees it: the ego route, lanes, drivable area."""
+        spec = self.scenario.road
+        lane = self.scenario.ego.lane
+        offsets = tuple((k - lane) * spec.lane_width for k in range(spec.lanes))
+        return RoadEnvironment(
+            reference_path=self.ego_path,
+            drivable_area=self.road.drivable_area,
+            lane_width=spec.lane_width,
+            lane_offsets=offsets,
+            speed_limit=spec.speed_limit,
+        )
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def time(self) -> float:
+        """Simulation time [s]."""
+        return float(self.scene.data.time)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(n, 2) centres [m] (a view; do not modify)."""
+        return self.scene.qpos[:, :2]
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(n, 2) velocities [m/s] (a view; do not modify)."""
+        return self.scene.qvel[:, :2]
+
+    @property
+    def yaws(self) -> np.ndarray:
+        """(n,) headings [rad] (a view; do not modify)."""
+        return self.scene.qpos[:, 2]
+
+    def speeds_along_heading(self) -> np.ndarray:
+        """(n,) velocity projected on each body's heading [m/s]."""
+        yaw = self.scene.qpos[:, 2]
+        v = self.scene.qvel
+        return v[:, 0] * np.cos(yaw) + v[:, 1] * np.sin(yaw)
+
+    def ego_progress(self) -> float:
+        """Arc length of the ego along its route [m]."""
+        s, _ = self.ego_path.to_frenet(self.scene.qpos[0, 0], self.scene.qpos[0, 1])
+        return float(s)
+
+    def view(self) -> WorldView:
+        """True states of all bodies for the behaviours."""
+        return WorldView(
+            time=self.time,
+            position=self.scene.qpos[:, :2].copy(),
+            velocity=self.scene.qvel[:, :2].copy(),
+            yaw=self.scene.qpos[:, 2].copy(),
+            length=self.lengths,
+            width=self.widths,
+            types=self.types,
+        )
+
+    def observe(
+        self, rng: np.random.Generator | None = None, noise: ObservationNoise | None = None
+    ) -> tuple[KinematicState, list[RoadUser]]:
+        """The ego's state and the road users as the planner perceives them.
+
+        Args:
+            rng: generator for the observation noise (needed if ``noise`` is enabled).
+            noise: standard deviations; None observes exactly.
+
+        The ego's acceleration is the one its current plan commands; road users are
+        reported with a = 0. Hidden road users (sensor range, occlusion) are left out.
+
+        Returns:
+            (ego state, road users with ids = entity indices, shapes, masses and legal
+            corridors).
+        """
+        qpos, qvel = self.scene.qpos, self.scene.qvel
+        v_along = self.speeds_along_heading()
+        x, y, yaw = qpos[:, 0].copy(), qpos[:, 1].copy(), qpos[:, 2].copy()
+        v = v_along.copy()
+        if noise is not None and noise.enabled:
+            if rng is None:
+                raise ValueError("observe: observation noise needs a numpy Generator (rng)")
+            sigma_p = np.full(self.n, noise.position)
+            sigma_p[0] = noise.ego_position
+            x += rng.normal(0.0, 1.0, self.n) * sigma_p
+            y += rng.normal(0.0, 1.0, self.n) * sigma_p
+            yaw[1:] += rng.normal(0.0, noise.yaw, self.n - 1)
+            v[1:] += rng.normal(0.0, noise.velocity, self.n - 1)
+        t = self.time
+        visible = self.visible()
+        a_plan = float(self.ego_plan.sample(t)[2] @ np.array([math.cos(yaw[0]), math.sin(yaw[0])]))
+        ego_state = KinematicState(
+            float(x[0]), float(y[0]), float(yaw[0]), float(v[0]), a_plan, float(qvel[0, 2])
+        )
+        legal = self.fleet.legal_corridors(t)
+        users = [
+            RoadUser(
+                id=i,
+                type=self.types[i],
+                state=KinematicState(
+                    float(x[i]), float(y[i]), float(yaw[i]), float(v[i]), 0.0, float(qvel[i, 2])
+                ),
+                shape=Shape(float(self.lengths[i]), float(self.widths[i])),
+                mass=float(self.scene.masses[i]),
+                legal=legal[i - 1],
+            )
+            for i in range(1, self.n)
+            if visible[i]
+        ]
+        return ego_state, users
+
+    def visible(self) -> np.ndarray:
+        """(n,) bool: which bodies the ego perceives (entity 0, the ego, is always True).
+
+        Applies the scenario's sensor range and, if enabled, occlusion: a road user is
+        hidden when the lines of sight from the ego's centre to its centre and to all
+        four corners pass through another vehicle's footprint (pedestrians and
+        cyclists do not occlude).
+        """
+        sensor = self.scenario.sensor
+        visible = np.ones(self.n, dtype=bool)
+        if self.n == 1 or (sensor.range is None and not sensor.occlusion):
+            return visible
+        pos = self.scene.qpos[:, :2]
+        eye = pos[0]
+        if sensor.range is not None:
+            visible &= np.hypot(*(pos - eye).T) <= sensor.range
+        if sensor.occlusion:
+            visible[1:] &= ~_occluded(eye, self.scene.qpos, self.lengths, self.widths, self._occluders)
+        visible[0] = True
+        return visible
+
+    # ------------------------------------------------------------------ stepping
+
+    def set_ego_plan(self, plan: TrajectoryReference) -> None:
+        """Track ``plan`` from now on (until the ego's first contact)."""
+        self.ego_plan = plan
+
+    def _update_controls(self, t: float) -> None:
+        """Behaviours and controllers of all bodies at time ``t`` [s] (one vectorised call)."""
+        scene, fleet = self.scene, self.fleet
+        if fleet.k and fleet.due(t):
+            fleet.decide(self.view())
+        p_ref, v_ref, a_ref = self._p_ref, self._v_ref, self._a_ref
+        yaw_ref, rate_ref = self._yaw_ref, self._rate_ref
+        if fleet.k:
+            p, v, a, yaw, rate = fleet.references(t)
+            p_ref[1:], v_ref[1:], a_ref[1:], yaw_ref[1:], rate_ref[1:] = p, v, a, yaw, rate
+        if not self.crashed[0]:
+            p, v, a, yaw, rate = self.ego_plan.sample(t)
+            err = math.hypot(scene.qpos[0, 0] - p[0], scene.qpos[0, 1] - p[1])
+            self._track_sq += err * err
+            self._track_n += 1
+            self._track_max = max(self._track_max, err)
+            p_ref[0], v_ref[0], a_ref[0], yaw_ref[0], rate_ref[0] = p, v, a, yaw, rate
+        ctrl = tracking_forces(
+            self.control,
+            scene.masses,
+            scene.yaw_inertia,
+            scene.qpos,
+            scene.qvel,
+            p_ref,
+            v_ref,
+            a_ref,
+            yaw_ref,
+            rate_ref,
+        )
+        if self.crashed.any():
+            rows = np.flatnonzero(self.crashed)
+            brake = brake_forces(self.control, scene.masses[rows], scene.yaw_inertia[rows], scene.qvel[rows])
+            # No braking during a crash pulse: it would contaminate the measured delta-v.
+            brake[self.recorder.in_pulse[rows]] = 0.0
+            ctrl[rows] = brake
+        scene.ctrl[:] = ctrl
+
+    def step(self) -> list[ImpactMeasurement]:
+        """One physics step: behaviours, controllers, ``mj_step``, impact measurement.
+
+        Controls are recomputed every ``control_interval`` steps (held in between),
+        and every step once a body has crashed.
+
+        Returns:
+            The collision episodes that ended in this step.
+        """
+        clock = time.perf_counter
+        t_start = clock()
+        scene = self.scene
+        if self._control_countdown <= 0 or self._any_crashed:
+            self._update_controls(float(scene.data.time))
+            self._control_countdown = self.control_interval
+        self._control_countdown -= 1
+        recorder = self.recorder
+        recorder.before_step()
+        t_physics = clock()
+        scene.step()
+        t_measure = clock()
+        done = recorder.after_step() if (scene.data.ncon or recorder.busy) else []
+        if scene.data.ncon:
+            new = recorder.touched & ~self.crashed
+            if new.any():
+                self.crashed |= new
+                self._any_crashed = True
+                if new[0]:
+                    self.ego_crash_time = float(scene.data.time) - scene.dt
+                self.fleet.deactivate(new[1:])
+                scene.ctrl[np.flatnonzero(new)] = 0.0
+        t_end = clock()
+        timing = self.timing
+        timing["control"] += t_physics - t_start
+        timing["mj_step"] += t_measure - t_physics
+        timing["measurement"] += t_end - t_measure
+        return done
+
+    def finish(self, complete: bool = False) -> list[ImpactMeasurement]:
+        """Close open collision episodes at the end of a run.
+
+        Args:
+            complete: mark them complete (the bodies have come to rest).
+        """
+        return self.recorder.finish(complete)
+
+    # ------------------------------------------------------------------ diagnostics
+
+    def tracking_error(self) -> tuple[float, float]:
+        """RMS and maximum distance [m] between the ego and its plan before any contact."""
+        if self._track_n == 0:
+            return 0.0, 0.0
+        return math.sqrt(self._track_sq / self._track_n), self._track_max
+
+    def ego_distances(self, distmax: float = 50.0) -> np.ndarray:
+        """(n - 1,) distances [m] from the ego's geom to every road user's (capped at distmax)."""
+        scene = self.scene
+        ego_geom = int(scene.geom_ids[0])
+        out = np.empty(len(self._other_geoms))
+        for k, g in enumerate(self._other_geoms):
+            out[k] = mujoco.mj_geomDistance(scene.model, scene.data, ego_geom, int(g), distmax, None)
+        return out
+
+    def diverged(self, max_penetration: float) -> str | None:
+        """Why the simulation cannot be trusted any more, or None.
+
+        Args:
+            max_penetration: largest acceptable geom overlap [m].
+        """
+        scene = self.scene
+        if not (np.isfinite(scene.data.qpos).all() and np.isfinite(scene.data.qvel).all()):
+            return "non-finite state (NaN or Inf in qpos/qvel)"
+        warnings = scene.data.warning
+        bad = warnings[mujoco.mjtWarning.mjWARN_BADQACC].number
+        if bad:
+            return "MuJoCo reported a bad acceleration (mjWARN_BADQACC) and reset the state"
+        if self.recorder.max_penetration > max_penetration:
+            return f"penetration {self.recorder.max_penetration:.3f} m exceeds the bound {max_penetration} m"
+        return None
+
+
+def _occluded(
+    eye: np.ndarray, qpos: np.ndarray, length: np.ndarray, width: np.ndarray, occluders: np.ndarray
+) -> np.ndarray:
+    """(n - 1,) bool: bodies 1..n-1 fully hidden from ``eye`` by occluder footprints.
+
+    Vectorised slab test of every sight line (eye to a target's centre and corners)
+    against every occluder rectangle (in the rectangle's own frame).
+    """
+    n = len(qpos)
+    c, s = np.cos(qpos[:, 2]), np.sin(qpos[:, 2])
+    hl, hw = 0.5 * length, 0.5 * width
+    # Target points: centre and 4 corners of bodies 1..n-1, shape (n-1, 5, 2).
+    sx = np.array([0.0, 1.0, 1.0, -1.0, -1.0])
+    sy = np.array([0.0, 1.0, -1.0, 1.0, -1.0])
+    lx = sx[None, :] * hl[1:, None] * 0.9
+    ly = sy[None, :] * hw[1:, None] * 0.9
+    px = qpos[1:, 0, None] + lx * c[1:, None] - ly * s[1:, None]
+    py = qpos[1:, 1, None] + lx * s[1:, None] + ly * c[1:, None]
+    idx = np.flatnonzero(occluders)
+    if idx.size == 0:
+        return np.zeros(n - 1, dtype=bool)
+    # Segment eye -> point in each occluder's frame: (n-1, 5, k).
+    ox, oy = qpos[idx, 0], qpos[idx, 1]
+    oc, os_ = c[idx], s[idx]
+    ex, ey = eye[0] - ox, eye[1] - oy
+    a_x = ex * oc + ey * os_
+    a_y = -ex * os_ + ey * oc
+    dx = px[..., None] - ox
+    dy = py[..., None] - oy
+    b_x = dx * oc + dy * os_
+    b_y = -dx * os_ + dy * oc
+    t0 = np.zeros(b_x.shape)
+    t1 = np.ones(b_x.shape)
+    for a, b, half in ((a_x, b_x, hl[idx]), (a_y, b_y, hw[idx])):
+        d = b - a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lo = (-half - a) / d
+            hi = (half - a) / d
+        near = np.where(d != 0, np.minimum(lo, hi), np.where(np.abs(a) <= half, -np.inf, np.inf))
+        far = np.where(d != 0, np.maximum(lo, hi), np.where(np.abs(a) <= half, np.inf, -np.inf))
+        t0 = np.maximum(t0, near)
+        t1 = np.minimum(t1, far)
+    blocked = t0 < t1  # the sight line crosses the rectangle
+    # A body never occludes itself.
+    own = idx[None, None, :] == np.arange(1, n)[:, None, None]
+    blocked &= ~own
+    return blocked.any(axis=2).all(axis=1)

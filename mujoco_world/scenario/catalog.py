@@ -1,0 +1,569 @@
+"""Catalog of classic scenarios and a seeded generator of random variants.
+
+Each family is a function of a ``numpy.random.Generator`` or None: with None it
+returns the catalog scenario (default parameters), with a generator it varies
+positions, speeds, types and behaviours within plausible ranges. ``CATALOG`` maps a
+name to its family; ``generate_scenarios`` draws thousands of variants reproducibly.
+
+Road frame reminders (see ``road``): the straight main road runs along +x from the
+origin, lane 0 of the ego direction lies right of the centre line (y < 0); on the
+intersection the main road runs from x = -length/2 and the cross road along +y.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from mujoco_world.scenario.spec import (
+    BehaviourSpec,
+    CrossingSpec,
+    EgoSpec,
+    IdmSpec,
+    LegalSpec,
+    RoadSpec,
+    RoadUserSpec,
+    RouteSpec,
+    Scenario,
+    SensorSpec,
+)
+
+
+class _Draw:
+    """Defaults without a generator, uniform draws with one."""
+
+    def __init__(self, rng: np.random.Generator | None) -> None:
+        self.rng = rng
+
+    def __call__(self, default: float, low: float, high: float) -> float:
+        if self.rng is None:
+            return float(default)
+        return float(self.rng.uniform(low, high))
+
+    def choice(self, default: str, options: Sequence[str]) -> str:
+        if self.rng is None:
+            return default
+        return str(options[int(self.rng.integers(len(options)))])
+
+    def chance(self, probability: float, default: bool) -> bool:
+        if self.rng is None:
+            return default
+        return bool(self.rng.random() < probability)
+
+
+def _user(name: str, kind: str, route: RouteSpec, s0: float, behaviour: BehaviourSpec, **kw) -> RoadUserSpec:
+    return RoadUserSpec(name=name, type=kind, route=route, s0=s0, behaviour=behaviour, **kw)
+
+
+def _idm(speed: float, **params: float) -> BehaviourSpec:
+    return BehaviourSpec(kind="idm", speed=speed, idm=IdmSpec(**params))
+
+
+def _scripted(speed: float, **kw) -> BehaviourSpec:
+    return BehaviourSpec(kind="scripted", speed=speed, **kw)
+
+
+def _parked() -> BehaviourSpec:
+    return BehaviourSpec(kind="parked")
+
+
+# --------------------------------------------------------------------------- families
+
+
+def overtake_cyclist(rng: np.random.Generator | None = None) -> Scenario:
+    """Paper Fig. 3: a cyclist ahead in the ego lane, oncoming traffic in the other lane."""
+    draw = _Draw(rng)
+    ego_speed = draw(13.0, 9.0, 15.0)
+    cyclist = _user(
+        "cyclist",
+        "bicycle",
+        RouteSpec(lane=0, offset=-1.0),
+        draw(50.0, 35.0, 70.0),
+        _scripted(draw(5.0, 3.5, 7.0)),
+        legal=LegalSpec(speed_limit=8.0, lateral_half_width=0.6),
+    )
+    oncoming = [
+        _user(
+            f"oncoming_{k}",
+            draw.choice("car", ["car", "car", "truck", "bus"]) if k else "car",
+            RouteSpec(lane=0, direction=-1),
+            s0,
+            _idm(draw(13.0, 10.0, 15.0)),
+        )
+        for k, s0 in enumerate((draw(150.0, 110.0, 190.0), draw(70.0, 30.0, 80.0)))
+    ]
+    return Scenario(
+        name="overtake_cyclist",
+        description="Paper Fig. 3: overtake a cyclist only if the oncoming traffic allows it",
+        road=RoadSpec(length=300.0, speed_limit=16.7),
+        ego=EgoSpec(s0=10.0, speed=ego_speed, goal_s=270.0),
+        road_users=(cyclist, *oncoming),
+        duration=30.0,
+    )
+
+
+def pedestrian_behind_parked(rng: np.random.Generator | None = None) -> Scenario:
+    """A pedestrian steps out from behind a parked van too late to stop: brake or swerve."""
+    draw = _Draw(rng)
+    parked_x = draw(70.0, 55.0, 90.0)
+    ego_speed = draw(13.9, 11.0, 13.9)
+    road = RoadSpec(length=200.0, speed_limit=13.9, parking_width=2.5)
+    kerb_y = -(road.half_width + road.parking_width + road.shoulder)
+    ped_x = parked_x + draw(3.2, 2.8, 4.0)
+    start_y = kerb_y + 1.0  # hidden in the parking strip, in front of the van
+    ped = _user(
+        "pedestrian",
+        "pedestrian",
+        RouteSpec(road="waypoints", waypoints=((ped_x, start_y), (ped_x, 9.0))),
+        0.0,
+        _scripted(
+            0.0,
+            trigger_distance=draw(21.0, 17.0, 26.0),
+            speed_profile=((0.0, 0.0), (0.6, draw(2.2, 1.6, 2.8))),
+        ),
+        legal=LegalSpec(speed_limit=2.5, lateral_half_width=0.5, stop_line=0.3),
+    )
+    van = _user(
+        "parked_van",
+        "parked_vehicle",
+        RouteSpec(lane=0, offset=-(0.5 * road.lane_width + 0.5 * road.parking_width)),
+        parked_x,
+        _parked(),
+        length=5.5,
+        width=2.1,
+    )
+    oncoming = _user(
+        "oncoming",
+        "car",
+        RouteSpec(lane=0, direction=-1),
+        draw(110.0, 80.0, 150.0),
+        _idm(draw(12.0, 9.0, 13.9)),
+    )
+    return Scenario(
+        name="pedestrian_behind_parked",
+        description="a pedestrian steps out from behind a parked van; braking alone is too late",
+        road=road,
+        sensor=SensorSpec(occlusion=True),
+        ego=EgoSpec(s0=10.0, speed=ego_speed, goal_s=180.0),
+        road_users=(van, ped, oncoming),
+        duration=20.0,
+    )
+
+
+def highway_cut_in(rng: np.random.Generator | None = None) -> Scenario:
+    """A car from the right lane cuts in close ahead of the ego on a three-lane highway."""
+    draw = _Draw(rng)
+    ego_speed = draw(25.0, 22.0, 28.0)
+    cutter = _user(
+        "cutter",
+        draw.choice("car", ["car", "car", "truck"]),
+        RouteSpec(lane=0),
+        draw(30.0, 25.0, 40.0),
+        _scripted(
+            draw(22.0, 18.0, 24.0),
+            trigger_distance=draw(24.0, 18.0, 30.0),
+            lateral=((draw(1.8, 1.2, 2.5), 3.5),),
+        ),
+        legal=LegalSpec(lateral_half_width=0.6),
+    )
+    ahead = _user("ahead", "car", RouteSpec(lane=1), draw(100.0, 80.0, 130.0), _idm(draw(25.0, 22.0, 27.0)))
+    left = _user("left_lane", "car", RouteSpec(lane=2), draw(18.0, 5.0, 30.0), _idm(draw(27.0, 25.0, 30.0)))
+    slow_right = _user(
+        "slow_right", "truck", RouteSpec(lane=0), draw(110.0, 90.0, 140.0), _idm(draw(22.0, 20.0, 23.0))
+    )
+    return Scenario(
+        name="highway_cut_in",
+        description="highway: a car cuts in from the right with a short gap",
+        road=RoadSpec(length=500.0, lanes=3, speed_limit=30.0, boundary="wall"),
+        ego=EgoSpec(lane=1, s0=10.0, speed=ego_speed, goal_s=450.0),
+        road_users=(cutter, ahead, left, slow_right),
+        duration=25.0,
+    )
+
+
+def tailgater_sudden_stop(rng: np.random.Generator | None = None) -> Scenario:
+    """The car ahead stops suddenly while a tailgater follows the ego far too closely."""
+    draw = _Draw(rng)
+    speed = draw(15.0, 12.0, 16.7)
+    lead = _user(
+        "lead",
+        "car",
+        RouteSpec(lane=0),
+        20.0 + draw(24.0, 20.0, 30.0),
+        _scripted(
+            speed,
+            start_time=draw(2.5, 1.5, 4.0),
+            speed_profile=((0.0, speed), (speed / draw(7.5, 6.0, 9.0), 0.0)),
+        ),
+    )
+    tailgater = _user(
+        "tailgater",
+        draw.choice("car", ["car", "car", "truck"]),
+        RouteSpec(lane=0),
+        20.0 - draw(10.5, 9.5, 12.0),
+        _idm(speed, time_headway=0.4, min_gap=1.5, reaction_time=draw(0.9, 0.7, 1.2), max_deceleration=7.0),
+        legal=LegalSpec(lateral_half_width=0.5),
+    )
+    oncoming = _user(
+        "oncoming",
+        "car",
+        RouteSpec(lane=0, direction=-1),
+        draw(140.0, 110.0, 170.0),
+        _idm(draw(14.0, 11.0, 16.0)),
+    )
+    return Scenario(
+        name="tailgater_sudden_stop",
+        description="the car ahead brakes hard; a tailgater sits 0.4 s behind the ego",
+        road=RoadSpec(length=250.0, speed_limit=16.7),
+        ego=EgoSpec(s0=20.0, speed=speed, goal_s=230.0),
+        road_users=(lead, tailgater, oncoming),
+        duration=20.0,
+    )
+
+
+def red_light_runner(rng: np.random.Generator | None = None) -> Scenario:
+    """The ego crosses on green; a car on the cross road runs its red light."""
+    draw = _Draw(rng)
+    road = RoadSpec(kind="intersection", length=160.0, speed_limit=13.9)
+    half = 0.5 * road.length
+    stop_line = half - road.half_width - road.shoulder - 2.0
+    runner_speed = draw(15.0, 12.0, 17.0)
+    runner = _user(
+        "runner",
+        draw.choice("car", ["car", "car", "motorcycle", "truck"]),
+        RouteSpec(road="cross", lane=0),
+        draw(8.0, 0.0, 20.0),
+        _scripted(runner_speed),
+        legal=LegalSpec(lateral_half_width=0.5, stop_line=stop_line),
+    )
+    obeying = _user(
+        "obeying",
+        "car",
+        RouteSpec(road="cross", lane=0, direction=-1),
+        draw(40.0, 25.0, 50.0),
+        _idm(draw(11.0, 9.0, 13.0), stop_at=stop_line),
+        legal=LegalSpec(lateral_half_width=0.5, stop_line=stop_line),
+    )
+    leader = _user("leader", "car", RouteSpec(lane=0), draw(55.0, 45.0, 60.0), _idm(13.0))
+    return Scenario(
+        name="red_light_runner",
+        description="intersection: the ego has green, a car from the right runs the red light",
+        road=road,
+        ego=EgoSpec(s0=20.0, speed=draw(12.0, 10.0, 13.9), goal_s=150.0),
+        road_users=(runner, obeying, leader),
+        duration=20.0,
+    )
+
+
+def turning_truck_cyclist(rng: np.random.Generator | None = None) -> Scenario:
+    """A truck turns right across a cyclist beside it; the cyclist swerves into the ego lane."""
+    draw = _Draw(rng)
+    road = RoadSpec(kind="intersection", length=160.0, speed_limit=13.9, parking_width=1.5)
+    truck = _user(
+        "truck",
+        "truck",
+        RouteSpec(lane=0, turn="right"),
+        draw(40.0, 35.0, 45.0),
+        _scripted(8.0, speed_profile=((0.0, 8.0), (4.0, 4.0), (9.0, 4.0), (12.0, 8.0))),
+    )
+    bike_lane = -(0.5 * road.lane_width + 0.5 * road.parking_width)
+    cyclist = _user(
+        "cyclist",
+        "bicycle",
+        RouteSpec(lane=0, offset=bike_lane),
+        draw(38.0, 30.0, 46.0),
+        _scripted(
+            draw(5.0, 4.0, 6.0),
+            start_time=draw(4.5, 3.5, 6.0),
+            lateral=((1.0, draw(2.2, 1.6, 2.8)),),
+        ),
+        legal=LegalSpec(speed_limit=8.0, lateral_half_width=0.6),
+    )
+    oncoming = _user("oncoming", "car", RouteSpec(lane=0, direction=-1), draw(60.0, 30.0, 90.0), _idm(12.0))
+    return Scenario(
+        name="turning_truck_cyclist",
+        description="a right-turning truck cuts across a cyclist, who swerves out into the ego lane",
+        road=road,
+        ego=EgoSpec(s0=8.0, speed=draw(9.0, 7.0, 11.0), goal_s=150.0),
+        road_users=(truck, cyclist, oncoming),
+        duration=25.0,
+    )
+
+
+def oncoming_drift(rng: np.random.Generator | None = None) -> Scenario:
+    """An oncoming car drifts into the ego lane; a cyclist rides on the right edge."""
+    draw = _Draw(rng)
+    drifter = _user(
+        "drifter",
+        draw.choice("car", ["car", "car", "truck", "bus"]),
+        RouteSpec(lane=0, direction=-1),
+        draw(100.0, 80.0, 120.0),
+        _scripted(
+            draw(18.0, 14.0, 20.0),
+            trigger_distance=draw(70.0, 55.0, 85.0),
+            lateral=((draw(2.5, 1.5, 3.0), draw(3.2, 2.5, 3.8)),),
+        ),
+        legal=LegalSpec(lateral_half_width=0.5),
+    )
+    cyclist = _user(
+        "cyclist",
+        "bicycle",
+        RouteSpec(lane=0, offset=-1.2),
+        draw(60.0, 45.0, 75.0),
+        _scripted(draw(5.0, 4.0, 6.0)),
+        legal=LegalSpec(speed_limit=8.0, lateral_half_width=0.6),
+    )
+    return Scenario(
+        name="oncoming_drift",
+        description="rural road: an oncoming car drifts into the ego lane next to a cyclist",
+        road=RoadSpec(length=300.0, speed_limit=22.2),
+        ego=EgoSpec(s0=10.0, speed=draw(18.0, 15.0, 20.0), goal_s=280.0),
+        road_users=(drifter, cyclist),
+        duration=25.0,
+    )
+
+
+def curve_truck(rng: np.random.Generator | None = None) -> Scenario:
+    """On a curve between walls an oncoming truck cuts the corner into the ego lane."""
+    draw = _Draw(rng)
+    road = RoadSpec(
+        kind="curved",
+        length=260.0,
+        radius=draw(70.0, 55.0, 90.0),
+        curve_angle=draw(-80.0, -100.0, -60.0),
+        lead_in=60.0,
+        speed_limit=16.7,
+        boundary="wall",
+    )
+    truck = _user(
+        "truck",
+        draw.choice("truck", ["truck", "bus"]),
+        RouteSpec(lane=0, direction=-1),
+        draw(95.0, 80.0, 110.0),
+        _scripted(
+            draw(12.0, 10.0, 14.0),
+            trigger_distance=draw(65.0, 50.0, 80.0),
+            lateral=((draw(2.5, 2.0, 3.5), draw(1.6, 1.0, 2.2)),),
+        ),
+        legal=LegalSpec(lateral_half_width=0.4),
+    )
+    pedestrian = _user(
+        "walker",
+        "pedestrian",
+        RouteSpec(lane=0, offset=-1.9),
+        draw(75.0, 60.0, 90.0),
+        _scripted(1.3),
+        legal=LegalSpec(speed_limit=2.5, lateral_half_width=0.5),
+    )
+    return Scenario(
+        name="curve_truck",
+        description="curved road between walls: an oncoming truck cuts the corner, a walker on the edge",
+        road=road,
+        ego=EgoSpec(s0=8.0, speed=draw(14.0, 11.0, 16.0), goal_s=240.0),
+        road_users=(truck, pedestrian),
+        duration=25.0,
+    )
+
+
+def dense_urban(rng: np.random.Generator | None = None) -> Scenario:
+    """A busy urban street (20 road users): traffic both ways, parked cars, cyclists, pedestrians."""
+    draw = _Draw(rng)
+    road = RoadSpec(length=300.0, speed_limit=13.9, parking_width=2.5)
+    kerb_r = road.half_width + road.parking_width + road.shoulder
+    kerb_l = road.half_width + road.shoulder
+    parking = RouteSpec(lane=0, offset=-(0.5 * road.lane_width + 0.5 * road.parking_width))
+    users: list[RoadUserSpec] = []
+    for k, s0 in enumerate((35.0, 110.0)):
+        users.append(
+            _user(
+                f"car_{k}",
+                "car",
+                RouteSpec(lane=0),
+                s0 + draw(0.0, -5.0, 5.0),
+                _idm(draw(11.0, 9.0, 13.9)),
+            )
+        )
+    users.append(_user("bus", "bus", RouteSpec(lane=0), draw(70.0, 60.0, 80.0), _idm(9.0)))
+    users.append(
+        _user("taxi", "taxi", RouteSpec(lane=0), draw(185.0, 175.0, 195.0), _idm(draw(10.0, 8.0, 12.0)))
+    )
+    for k, s0 in enumerate((20.0, 60.0, 100.0, 145.0, 190.0, 235.0)):
+        kind = draw.choice("car", ["car", "car", "car", "truck", "motorcycle"])
+        users.append(
+            _user(
+                f"oncoming_{k}",
+                kind,
+                RouteSpec(lane=0, direction=-1),
+                s0 + draw(0.0, -6.0, 6.0),
+                _idm(draw(12.0, 9.0, 13.9)),
+            )
+        )
+    for k, s0 in enumerate((58.0, 92.0, 178.0, 232.0)):
+        users.append(_user(f"parked_{k}", "parked_vehicle", parking, s0 + draw(0.0, -3.0, 3.0), _parked()))
+    for k, s0 in enumerate((150.0, 205.0)):
+        users.append(
+            _user(
+                f"cyclist_{k}",
+                "bicycle",
+                RouteSpec(lane=0, offset=-1.1),
+                s0 + draw(0.0, -10.0, 10.0),
+                _scripted(draw(5.0, 4.0, 6.5)),
+                legal=LegalSpec(speed_limit=8.0, lateral_half_width=0.6),
+            )
+        )
+    for k, (x, side) in enumerate(((130.0, -1), (160.0, 1), (210.0, -1), (262.0, 1))):
+        x = x + draw(0.0, -5.0, 5.0)
+        y0 = -(kerb_r + 1.5) if side < 0 else kerb_l + 1.5
+        y1 = kerb_l + 2.0 if side < 0 else -(kerb_r + 2.0)
+        users.append(
+            _user(
+                f"pedestrian_{k}",
+                "pedestrian",
+                RouteSpec(road="waypoints", waypoints=((x, y0), (x, y1))),
+                0.0,
+                BehaviourSpec(
+                    kind="pedestrian",
+                    speed=draw(1.4, 1.0, 1.8),
+                    crossing=CrossingSpec(wait_at=1.4, gap_time=draw(4.0, 2.5, 5.0)),
+                ),
+                legal=LegalSpec(speed_limit=2.5, lateral_half_width=0.5),
+            )
+        )
+    return Scenario(
+        name="dense_urban",
+        description="urban street with ~20 road users: traffic both ways, parked cars, cyclists, pedestrians",
+        road=road,
+        ego=EgoSpec(s0=10.0, speed=draw(10.0, 8.0, 12.0), goal_s=260.0),
+        road_users=tuple(users),
+        duration=40.0,
+    )
+
+
+# --------------------------------------------------------------------------- registry
+
+
+@dataclass(frozen=True, slots=True)
+class ScenarioFamily:
+    """A named scenario family.
+
+    Attributes:
+        name: catalog name. description: one line.
+        build: generator (or None for the catalog defaults) -> scenario.
+    """
+
+    name: str
+    description: str
+    build: Callable[[np.random.Generator | None], Scenario]
+
+
+_FAMILIES = (
+    overtake_cyclist,
+    pedestrian_behind_parked,
+    highway_cut_in,
+    tailgater_sudden_stop,
+    red_light_runner,
+    turning_truck_cyclist,
+    oncoming_drift,
+    curve_truck,
+    dense_urban,
+)
+
+#: Name -> family, in catalog order.
+CATALOG: dict[str, ScenarioFamily] = {
+    f.__name__: ScenarioFamily(f.__name__, (f.__doc__ or "").strip().splitlines()[0], f) for f in _FAMILIES
+}
+
+
+def catalog_names() -> list[str]:
+    """Names of the catalog scenarios in order."""
+    return list(CATALOG)
+
+
+def get_family(name: str) -> ScenarioFamily:
+    """The family called ``name``; ValueError lists the allowed names."""
+    if name not in CATALOG:
+        raise ValueError(f"unknown scenario {name!r}; allowed: {', '.join(CATALOG)}")
+    return CATALOG[name]
+
+
+def get_scenario(name: str) -> Scenario:
+    """The catalog scenario ``name`` (default parameters)."""
+    return get_family(name).build(None)
+
+
+def random_scenario(family: str, rng: np.random.Generator, name: str | None = None) -> Scenario:
+    """A random variant of ``family`` drawn with ``rng``.
+
+    Args:
+        family: catalog name.
+        rng: the generator; its state advances.
+        name: scenario name; defaults to the family name.
+    """
+    scenario = get_family(family).build(rng)
+    return scenario if name is None else dataclasses.replace(scenario, name=name)
+
+
+def generate_scenarios(n: int, seed: int, families: Sequence[str] | None = None) -> Iterator[Scenario]:
+    """Yield ``n`` random scenarios, cycling through ``families`` (default: all).
+
+    Scenario i is drawn from its own generator ``default_rng([seed, i])``, so any one
+    of them can be rebuilt without the others; names are ``<family>-s<seed>-<i>``.
+    """
+    if n < 0:
+        raise ValueError(f"n must be >= 0, got {n}")
+    names = list(families) if families is not None else catalog_names()
+    if not names:
+        raise ValueError("families must name at least one family")
+    for name in generated_names(n, seed, names):
+        yield scenario_by_name(name)
+
+
+_GENERATED = re.compile(r"^(?P<family>[a-z_]+)-s(?P<seed>\d+)-(?P<index>\d+)$")
+
+
+def scenario_by_name(name: str) -> Scenario:
+    """A catalog scenario (``dense_urban``) or a generated one (``dense_urban-s3-17``).
+
+    Generated names are those of ``generate_scenarios``: the scenario is rebuilt from
+    its family, seed and index alone.
+    """
+    match = _GENERATED.match(name)
+    if match is None:
+        return get_scenario(name)
+    seed, index = int(match["seed"]), int(match["index"])
+    return random_scenario(match["family"], np.random.default_rng([seed, index]), name=name)
+
+
+def generated_names(n: int, seed: int, families: Sequence[str] | None = None) -> list[str]:
+    """Names of the scenarios ``generate_scenarios(n, seed, families)`` yields."""
+    names = list(families) if families is not None else catalog_names()
+    for family in names:
+        get_family(family)
+    return [f"{names[i % len(names)]}-s{seed}-{i}" for i in range(n)]
+
+
+def describe(name: str) -> str:
+    """One line: name, road, number of road users, description."""
+    scenario = get_scenario(name)
+    return (
+        f"{name:<26} {scenario.road.kind.value:<12} {len(scenario.road_users):>2} road users  "
+        f"{CATALOG[name].description}"
+    )
+
+
+__all__ = [
+    "CATALOG",
+    "ScenarioFamily",
+    "catalog_names",
+    "describe",
+    "generate_scenarios",
+    "generated_names",
+    "get_family",
+    "get_scenario",
+    "random_scenario",
+    "scenario_by_name",
+]

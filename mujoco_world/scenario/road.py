@@ -1,0 +1,247 @@
+"""Road geometry from a ``RoadSpec``: centre lines, routes, drivable area and boundaries.
+
+Frames: the main road's reference line starts at the origin along +x (straight and
+curved roads) or runs from x = -length/2 to +length/2 through the origin
+(intersection, whose cross road runs along +y). Lateral offsets ``d`` are positive
+to the left of a line's direction.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from shapely.geometry import LineString, MultiLineString, Polygon, box
+
+from mujoco_world.scenario.fields import check
+from mujoco_world.scenario.spec import Boundary, RoadKind, RoadName, RoadSpec, RouteSpec, Turn
+
+#: Spacing of sampled centre lines [m].
+_SAMPLE_M = 1.0
+#: Thickness of wall and kerb boxes [m].
+BOUNDARY_THICKNESS_M = 0.4
+#: Height of walls and kerbs [m] (only for pictures: the world is planar).
+BOUNDARY_HEIGHT_M = {Boundary.WALL: 1.0, Boundary.KERB: 0.15}
+
+
+def polyline_frames(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit tangents and left normals of a polyline, shape (n, 2) each."""
+    diff = np.gradient(points, axis=0)
+    tangent = diff / np.linalg.norm(diff, axis=1, keepdims=True)
+    normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
+    return tangent, normal
+
+
+def offset_polyline(points: np.ndarray, d: float) -> np.ndarray:
+    """Polyline shifted by ``d`` [m] to its left, shape (n, 2)."""
+    _, normal = polyline_frames(points)
+    return points + d * normal
+
+
+def _dedupe(points: np.ndarray) -> np.ndarray:
+    keep = np.concatenate([[True], np.hypot(*np.diff(points, axis=0).T) > 1e-6])
+    return points[keep]
+
+
+def _bezier(p0: np.ndarray, h0: float, p1: np.ndarray, h1: float, n: int = 25) -> np.ndarray:
+    """Cubic Bezier from p0 (heading h0) to p1 (heading h1), shape (n, 2)."""
+    dist = float(np.hypot(*(p1 - p0)))
+    k = 0.55 * dist
+    c0 = p0 + k * np.array([math.cos(h0), math.sin(h0)])
+    c1 = p1 - k * np.array([math.cos(h1), math.sin(h1)])
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    return (1 - t) ** 3 * p0 + 3 * (1 - t) ** 2 * t * c0 + 3 * (1 - t) * t**2 * c1 + t**3 * p1
+
+
+@dataclass(frozen=True, slots=True)
+class StaticBox:
+    """A static box obstacle (wall or kerb segment).
+
+    Attributes:
+        center: (x, y) [m]. half_length, half_width, half_height: [m].
+        yaw: [rad]. kind: wall or kerb.
+    """
+
+    center: tuple[float, float]
+    half_length: float
+    half_width: float
+    half_height: float
+    yaw: float
+    kind: Boundary
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RoadGeometry:
+    """The built road.
+
+    Attributes:
+        spec: the road description.
+        main_line: main road reference line [m], shape (n, 2).
+        cross_line: cross road reference line [m], shape (m, 2), or None.
+        drivable_area: polygon [m].
+        boundaries: polylines [m] lined with walls or kerbs, each shape (k, 2).
+    """
+
+    spec: RoadSpec
+    main_line: np.ndarray
+    cross_line: np.ndarray | None
+    drivable_area: Polygon
+    boundaries: tuple[np.ndarray, ...]
+
+    # ------------------------------------------------------------------ lanes
+
+    def lane_offset(self, lane: int, direction: int) -> float:
+        """Offset d of a lane centre from the reference line [m] (left of the reference)."""
+        spec = self.spec
+        check(0 <= lane < spec.lanes, f"lane must lie in 0..{spec.lanes - 1}, got {lane}")
+        return direction * (-spec.half_width + (lane + 0.5) * spec.lane_width)
+
+    def _line(self, road: RoadName) -> np.ndarray:
+        if road is RoadName.CROSS:
+            check(self.cross_line is not None, "route.road 'cross' needs an intersection")
+            return self.cross_line  # type: ignore[return-value]
+        return self.main_line
+
+    def route(self, spec: RouteSpec) -> np.ndarray:
+        """Polyline of a route in its direction of travel [m], shape (n, 2)."""
+        if spec.road is RoadName.WAYPOINTS:
+            return _dedupe(np.asarray(spec.waypoints, dtype=float))
+        d = self.lane_offset(spec.lane, spec.direction) + spec.direction * spec.offset
+        if spec.turn is Turn.STRAIGHT or self.spec.kind is not RoadKind.INTERSECTION:
+            line = offset_polyline(self._line(spec.road), d)
+            return line if spec.direction > 0 else line[::-1].copy()
+        return self._turn_route(spec)
+
+    def _turn_route(self, spec: RouteSpec) -> np.ndarray:
+        half = 0.5 * self.spec.length
+        edge = self.spec.half_width + 0.5 * self.spec.shoulder
+        heading_in = {
+            (RoadName.MAIN, 1): 0.0,
+            (RoadName.MAIN, -1): math.pi,
+            (RoadName.CROSS, 1): 0.5 * math.pi,
+            (RoadName.CROSS, -1): -0.5 * math.pi,
+        }[(spec.road, spec.direction)]
+        heading_out = heading_in + (0.5 * math.pi if spec.turn is Turn.LEFT else -0.5 * math.pi)
+        exit_road, exit_dir = _arm_of_heading(heading_out)
+        d_in = self.lane_offset(spec.lane, spec.direction) + spec.direction * spec.offset
+        lane_out = min(spec.lane, self.spec.lanes - 1)
+        d_out = self.lane_offset(lane_out, exit_dir) + exit_dir * spec.offset
+
+        def point(road: RoadName, u: float, d: float) -> np.ndarray:
+            return np.array([u, d]) if road is RoadName.MAIN else np.array([-d, u])
+
+        n_arm = max(int((half - edge) / _SAMPLE_M), 2)
+        u_in = np.linspace(-half, -edge, n_arm) * spec.direction
+        entry = np.array([point(spec.road, u, d_in) for u in u_in])
+        u_out = np.linspace(edge, half, n_arm) * exit_dir
+        exit_ = np.array([point(exit_road, u, d_out) for u in u_out])
+        bend = _bezier(entry[-1], heading_in, exit_[0], heading_out)
+        return _dedupe(np.concatenate([entry, bend[1:-1], exit_]))
+
+    # ------------------------------------------------------------------ obstacles
+
+    def static_boxes(self) -> tuple[StaticBox, ...]:
+        """Wall or kerb boxes along the boundaries, just outside the drivable area."""
+        kind = self.spec.boundary
+        if kind is Boundary.NONE:
+            return ()
+        t = BOUNDARY_THICKNESS_M
+        height = BOUNDARY_HEIGHT_M[kind]
+        boxes = []
+        for line in self.boundaries:
+            simple = np.asarray(LineString(line).simplify(0.05).coords)
+            for a, b in zip(simple[:-1], simple[1:], strict=True):
+                seg = b - a
+                length = float(np.hypot(*seg))
+                if length < 1e-3:
+                    continue
+                tangent = seg / length
+                normal = np.array([-tangent[1], tangent[0]])
+                mid = 0.5 * (a + b)
+                if self.drivable_area.contains(shapely.Point(*(mid + 0.05 * normal))):
+                    normal = -normal  # point away from the road
+                center = mid + 0.5 * t * normal
+                boxes.append(
+                    StaticBox(
+                        center=(float(center[0]), float(center[1])),
+                        half_length=0.5 * length + 0.5 * t,
+                        half_width=0.5 * t,
+                        half_height=0.5 * height,
+                        yaw=float(math.atan2(tangent[1], tangent[0])),
+                        kind=kind,
+                    )
+                )
+        return tuple(boxes)
+
+
+def _arm_of_heading(heading: float) -> tuple[RoadName, int]:
+    c, s = round(math.cos(heading)), round(math.sin(heading))
+    return {
+        (1, 0): (RoadName.MAIN, 1),
+        (-1, 0): (RoadName.MAIN, -1),
+        (0, 1): (RoadName.CROSS, 1),
+        (0, -1): (RoadName.CROSS, -1),
+    }[(c, s)]
+
+
+def _main_line(spec: RoadSpec) -> np.ndarray:
+    if spec.kind is RoadKind.STRAIGHT:
+        n = max(int(spec.length / _SAMPLE_M), 2)
+        return np.column_stack([np.linspace(0.0, spec.length, n + 1), np.zeros(n + 1)])
+    if spec.kind is RoadKind.INTERSECTION:
+        half = 0.5 * spec.length
+        n = max(int(spec.length / _SAMPLE_M), 2)
+        return np.column_stack([np.linspace(-half, half, n + 1), np.zeros(n + 1)])
+    # Curved: lead-in along +x, arc, straight remainder.
+    sign = 1.0 if spec.curve_angle > 0 else -1.0
+    angle = math.radians(abs(spec.curve_angle))
+    lead = np.linspace(0.0, spec.lead_in, max(int(spec.lead_in / _SAMPLE_M), 1) + 1)
+    points = [np.column_stack([lead, np.zeros_like(lead)])]
+    n_arc = max(int(spec.arc_length / _SAMPLE_M), 8)
+    phi = np.linspace(0.0, angle, n_arc + 1)[1:]
+    cx, cy = spec.lead_in, sign * spec.radius
+    arc = np.column_stack([cx + spec.radius * np.sin(phi), cy - sign * spec.radius * np.cos(phi)])
+    points.append(arc)
+    rest = spec.length - spec.lead_in - spec.arc_length
+    if rest > 1e-6:
+        heading = sign * angle
+        u = np.linspace(0.0, rest, max(int(rest / _SAMPLE_M), 1) + 1)[1:]
+        end = arc[-1]
+        points.append(np.column_stack([end[0] + u * math.cos(heading), end[1] + u * math.sin(heading)]))
+    return _dedupe(np.concatenate(points))
+
+
+def build_road(spec: RoadSpec) -> RoadGeometry:
+    """Build the road geometry of ``spec``."""
+    main = _main_line(spec)
+    right = spec.half_width + spec.parking_width + spec.shoulder
+    left = spec.half_width + spec.shoulder
+    if spec.kind is not RoadKind.INTERSECTION:
+        left_line = offset_polyline(main, left)
+        right_line = offset_polyline(main, -right)
+        ring = np.concatenate([right_line, left_line[::-1]])
+        area = shapely.make_valid(Polygon(ring))
+        if not isinstance(area, Polygon):
+            area = max(getattr(area, "geoms", [area]), key=lambda g: g.area)
+        return RoadGeometry(spec, main, None, area, (left_line, right_line))
+    half = 0.5 * spec.length
+    cross = np.column_stack([np.zeros(len(main)), main[:, 0]])
+    union = box(-half, -right, half, left).union(box(-left, -half, right, half))
+    radius = spec.corner_radius
+    area = union.buffer(radius, join_style="round").buffer(-radius, join_style="round")
+    if radius == 0:
+        area = union
+    area = area.intersection(box(-half, -half, half, half))
+    inner = box(-half + 1e-3, -half + 1e-3, half - 1e-3, half - 1e-3)
+    edges = area.exterior.intersection(inner)
+    parts = edges.geoms if isinstance(edges, MultiLineString) else [edges]
+    boundaries = tuple(np.asarray(shapely.line_merge(p).coords) for p in parts if p.length > 0)
+    return RoadGeometry(spec, main, cross, area, _merge_lines(boundaries))
+
+
+def _merge_lines(lines: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    merged = shapely.line_merge(MultiLineString([LineString(line) for line in lines]))
+    parts = merged.geoms if isinstance(merged, MultiLineString) else [merged]
+    return tuple(np.asarray(p.coords) for p in parts)

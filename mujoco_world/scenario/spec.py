@@ -1,0 +1,626 @@
+"""Scenario descriptions: road, ego, road users and their behaviour, contact settings.
+
+A scenario is a tree of frozen dataclasses, validated at construction. It can be
+written in TOML (see ``data/example_scenario.toml``) and loaded with
+``load_scenario``; unknown keys are rejected by their dotted name.
+
+Conventions: lanes are counted from the right edge of the road *in the direction of
+travel* (lane 0 is the right-hand lane of a road user's own direction), lateral
+offsets are positive to the left of the direction of travel, and arc lengths ``s``
+are measured along a road user's own route from its start.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import Any
+
+from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, RoadUserType
+from mujoco_world.scenario.fields import (
+    check,
+    check_finite,
+    check_non_negative,
+    check_positive,
+    from_mapping,
+    knots,
+    parse_enum,
+)
+
+
+class RoadKind(StrEnum):
+    """Road layout."""
+
+    STRAIGHT = "straight"
+    CURVED = "curved"
+    INTERSECTION = "intersection"
+
+
+class Boundary(StrEnum):
+    """What lines the drivable area: walls stop every body, kerbs only motor vehicles."""
+
+    WALL = "wall"
+    KERB = "kerb"
+    NONE = "none"
+
+
+class RoadName(StrEnum):
+    """Which road a route follows; ``waypoints`` gives it explicitly."""
+
+    MAIN = "main"
+    CROSS = "cross"
+    WAYPOINTS = "waypoints"
+
+
+class Turn(StrEnum):
+    """Manoeuvre at an intersection."""
+
+    STRAIGHT = "straight"
+    LEFT = "left"
+    RIGHT = "right"
+
+
+class BehaviourKind(StrEnum):
+    """How a road user moves.
+
+    scripted: follows its speed profile and lateral profile, blind to everything.
+    idm: car following (intelligent driver model) with braking for obstacles ahead.
+    pedestrian: walks to ``crossing.wait_at``, waits for a gap, then crosses.
+    parked: holds its start pose with its brakes.
+    """
+
+    SCRIPTED = "scripted"
+    IDM = "idm"
+    PEDESTRIAN = "pedestrian"
+    PARKED = "parked"
+
+
+@dataclass(frozen=True, slots=True)
+class RoadSpec:
+    """Road geometry.
+
+    Attributes:
+        kind: straight, curved (lead-in, arc, straight remainder) or a four-way
+            intersection of the main road (along x) and a cross road (along y).
+        length: centre-line length of the main road [m] (and of the cross road).
+        lanes: number of lanes of each road.
+        lane_width: [m].
+        speed_limit: [m/s].
+        parking_width: drivable parking strip right of the main road's reference
+            direction [m] (parked vehicles stand in it).
+        shoulder: extra drivable width beyond the outer lanes [m].
+        boundary: what lines the drivable area.
+        radius: curve radius of the centre line [m] (curved only).
+        curve_angle: turning angle of the arc [deg], positive to the left (curved only).
+        lead_in: straight before the arc [m] (curved only).
+        corner_radius: kerb radius at the intersection corners [m].
+    """
+
+    kind: RoadKind = RoadKind.STRAIGHT
+    length: float = 200.0
+    lanes: int = 2
+    lane_width: float = 3.5
+    speed_limit: float = 13.9
+    parking_width: float = 0.0
+    shoulder: float = 0.5
+    boundary: Boundary = Boundary.KERB
+    radius: float = 80.0
+    curve_angle: float = 60.0
+    lead_in: float = 40.0
+    corner_radius: float = 8.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", parse_enum(RoadKind, "road", "kind", self.kind))
+        object.__setattr__(self, "boundary", parse_enum(Boundary, "road", "boundary", self.boundary))
+        check_positive(
+            "road",
+            length=self.length,
+            lane_width=self.lane_width,
+            speed_limit=self.speed_limit,
+            radius=self.radius,
+        )
+        check_non_negative(
+            "road",
+            parking_width=self.parking_width,
+            shoulder=self.shoulder,
+            lead_in=self.lead_in,
+            corner_radius=self.corner_radius,
+        )
+        check_finite("road", curve_angle=self.curve_angle)
+        check(
+            isinstance(self.lanes, int) and 1 <= self.lanes <= 8,
+            f"road.lanes must be an integer in 1..8, got {self.lanes!r}",
+        )
+        if self.kind is RoadKind.CURVED:
+            check(
+                0 < abs(self.curve_angle) <= 180,
+                f"road.curve_angle must lie in (0, 180] deg in magnitude, got {self.curve_angle}",
+            )
+            check(
+                self.radius > self.half_width + 1.0,
+                f"road.radius must exceed the road's half width + 1 m "
+                f"({self.half_width + 1.0:.1f} m), got {self.radius}",
+            )
+            check(
+                self.lead_in + self.arc_length <= self.length,
+                f"road.length ({self.length} m) must cover lead_in + arc "
+                f"({self.lead_in + self.arc_length:.1f} m)",
+            )
+        if self.kind is RoadKind.INTERSECTION:
+            check(
+                self.length > 4 * (self.half_width + self.corner_radius),
+                "road.length of an intersection must exceed 4 x (half width + corner_radius)",
+            )
+
+    @property
+    def half_width(self) -> float:
+        """Half the width of the lanes [m]."""
+        return 0.5 * self.lanes * self.lane_width
+
+    @property
+    def arc_length(self) -> float:
+        """Arc length of the curve of a curved road [m]."""
+        return self.radius * math.radians(abs(self.curve_angle))
+
+
+@dataclass(frozen=True, slots=True)
+class RouteSpec:
+    """The path a road user follows.
+
+    Attributes:
+        road: ``main``, ``cross`` (intersections only) or ``waypoints``.
+        lane: lane index from the right in the direction of travel.
+        direction: +1 along the road's reference direction (main: +x, cross: +y), -1 against.
+        offset: lateral offset from the lane centre [m], positive left of travel.
+        turn: manoeuvre at an intersection.
+        waypoints: world positions [m] (``road = "waypoints"``), at least two.
+    """
+
+    road: RoadName = RoadName.MAIN
+    lane: int = 0
+    direction: int = 1
+    offset: float = 0.0
+    turn: Turn = Turn.STRAIGHT
+    waypoints: tuple[tuple[float, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "road", parse_enum(RoadName, "route", "road", self.road))
+        object.__setattr__(self, "turn", parse_enum(Turn, "route", "turn", self.turn))
+        check(
+            isinstance(self.lane, int) and self.lane >= 0,
+            f"route.lane must be an integer >= 0, got {self.lane!r}",
+        )
+        check(self.direction in (1, -1), f"route.direction must be 1 or -1, got {self.direction!r}")
+        check_finite("route", offset=self.offset)
+        try:
+            points = tuple((float(x), float(y)) for x, y in self.waypoints)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"route.waypoints must be a list of [x, y] pairs, got {self.waypoints!r}"
+            ) from None
+        check(
+            all(math.isfinite(x) and math.isfinite(y) for x, y in points),
+            "route.waypoints must be finite",
+        )
+        object.__setattr__(self, "waypoints", points)
+        if self.road is RoadName.WAYPOINTS:
+            check(len(points) >= 2, "route.waypoints needs at least two points for road = waypoints")
+        else:
+            check(not points, "route.waypoints is only allowed with road = 'waypoints'")
+
+
+@dataclass(frozen=True, slots=True)
+class IdmSpec:
+    """Intelligent driver model (Treiber) with a reaction delay.
+
+    Attributes:
+        time_headway: desired time gap T [s].
+        min_gap: standstill gap s0 [m].
+        max_acceleration: a [m/s^2].
+        comfort_deceleration: b [m/s^2].
+        max_deceleration: braking limit [m/s^2].
+        reaction_time: delay between perception and action [s].
+        look_ahead: range of leader detection [m].
+        stop_at: arc length of a stop line it obeys [m] (red light), or None.
+        stop_until: time the stop line releases [s].
+    """
+
+    time_headway: float = 1.5
+    min_gap: float = 2.0
+    max_acceleration: float = 1.5
+    comfort_deceleration: float = 2.0
+    max_deceleration: float = 8.0
+    reaction_time: float = 0.0
+    look_ahead: float = 80.0
+    stop_at: float | None = None
+    stop_until: float = math.inf
+
+    def __post_init__(self) -> None:
+        check_non_negative(
+            "idm",
+            time_headway=self.time_headway,
+            min_gap=self.min_gap,
+            reaction_time=self.reaction_time,
+        )
+        check_positive(
+            "idm",
+            max_acceleration=self.max_acceleration,
+            comfort_deceleration=self.comfort_deceleration,
+            max_deceleration=self.max_deceleration,
+            look_ahead=self.look_ahead,
+        )
+        check_finite("idm", stop_at=self.stop_at)
+        check(
+            not math.isnan(self.stop_until) and self.stop_until >= 0,
+            f"idm.stop_until must be >= 0 s (inf allowed), got {self.stop_until}",
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class CrossingSpec:
+    """A pedestrian that waits at the kerb for a gap in the traffic.
+
+    Attributes:
+        wait_at: arc length along its route of the kerb where it waits [m].
+        gap_time: smallest time gap [s] to an approaching vehicle it accepts.
+        corridor: half width of the road strip a vehicle must be in to count [m].
+    """
+
+    wait_at: float = 2.0
+    gap_time: float = 4.0
+    corridor: float = 8.0
+
+    def __post_init__(self) -> None:
+        check_non_negative("crossing", wait_at=self.wait_at, gap_time=self.gap_time)
+        check_positive("crossing", corridor=self.corridor)
+
+
+@dataclass(frozen=True, slots=True)
+class BehaviourSpec:
+    """How a road user moves (see ``BehaviourKind``).
+
+    Until it is activated (``start_time`` passed and, if set, the ego within
+    ``trigger_distance``) a road user keeps ``speed`` and its route offset; then it
+    follows ``speed_profile`` and ``lateral``, whose times count from activation.
+
+    Attributes:
+        kind: behaviour model.
+        speed: initial (and, for idm, desired) speed [m/s].
+        start_time: earliest activation [s].
+        trigger_distance: activate once the ego's centre is this close [m], or None.
+        speed_profile: (time [s], speed [m/s]) knots after activation, linear between.
+        lateral: (time [s], offset [m], positive left of travel) knots after
+            activation, smooth (cubic smoothstep) between.
+        idm: car-following parameters (kind idm; defaults if omitted).
+        crossing: gap acceptance (kind pedestrian; defaults if omitted).
+    """
+
+    kind: BehaviourKind = BehaviourKind.SCRIPTED
+    speed: float = 0.0
+    start_time: float = 0.0
+    trigger_distance: float | None = None
+    speed_profile: tuple[tuple[float, float], ...] = ()
+    lateral: tuple[tuple[float, float], ...] = ()
+    idm: IdmSpec | None = None
+    crossing: CrossingSpec | None = None
+
+    def __post_init__(self) -> None:
+        kind = parse_enum(BehaviourKind, "behaviour", "kind", self.kind)
+        object.__setattr__(self, "kind", kind)
+        check_non_negative("behaviour", speed=self.speed, start_time=self.start_time)
+        check_positive("behaviour", trigger_distance=self.trigger_distance)
+        profile = knots("behaviour", "speed_profile", self.speed_profile)
+        check(
+            all(v >= 0 for _, v in profile),
+            "behaviour.speed_profile speeds must be >= 0 m/s",
+        )
+        object.__setattr__(self, "speed_profile", profile)
+        object.__setattr__(self, "lateral", knots("behaviour", "lateral", self.lateral))
+        if kind is BehaviourKind.IDM:
+            if self.idm is None:
+                object.__setattr__(self, "idm", IdmSpec())
+        else:
+            check(self.idm is None, f"behaviour.idm is only allowed with kind 'idm', not {kind.value!r}")
+        if kind is BehaviourKind.PEDESTRIAN:
+            if self.crossing is None:
+                object.__setattr__(self, "crossing", CrossingSpec())
+        else:
+            check(
+                self.crossing is None,
+                f"behaviour.crossing is only allowed with kind 'pedestrian', not {kind.value!r}",
+            )
+        if kind is BehaviourKind.PARKED:
+            check(
+                self.speed == 0 and not self.speed_profile and not self.lateral,
+                "behaviour of kind 'parked' takes no speed, speed_profile or lateral",
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class LegalSpec:
+    """What a road user may legally do; handed to the planner as its LegalCorridor.
+
+    Attributes:
+        speed_limit: its legal speed [m/s]; None uses the road's.
+        lateral_half_width: allowed sideways excursion of its centre [m].
+        stop_line: arc length along its route of a stop line it must respect
+            (red light) [m], or None.
+        stop_until: time the stop line releases [s].
+    """
+
+    speed_limit: float | None = None
+    lateral_half_width: float = 0.5
+    stop_line: float | None = None
+    stop_until: float = math.inf
+
+    def __post_init__(self) -> None:
+        check_non_negative("legal", speed_limit=self.speed_limit, lateral_half_width=self.lateral_half_width)
+        check_finite("legal", stop_line=self.stop_line)
+        check(
+            not math.isnan(self.stop_until) and self.stop_until >= 0,
+            f"legal.stop_until must be >= 0 s (inf allowed), got {self.stop_until}",
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class RoadUserSpec:
+    """One road user: its proxy body, route, behaviour and legal corridor.
+
+    Attributes:
+        name: unique name (MuJoCo body name).
+        type: road-user type (car, truck, bus, motorcycle, bicycle, pedestrian...).
+        route: the path it follows.
+        s0: start arc length along the route [m].
+        length: footprint length [m]; None uses the type's default shape.
+        width: footprint width [m]; None uses the type's default shape.
+        mass: [kg]; None uses ``mass_of`` (SPEC masses).
+        behaviour: how it moves.
+        legal: its legal corridor (rule violations become visible against it), or
+            None to let the planner derive one.
+    """
+
+    name: str
+    type: RoadUserType
+    route: RouteSpec = field(default_factory=RouteSpec)
+    s0: float = 0.0
+    length: float | None = None
+    width: float | None = None
+    mass: float | None = None
+    behaviour: BehaviourSpec = field(default_factory=BehaviourSpec)
+    legal: LegalSpec | None = None
+
+    def __post_init__(self) -> None:
+        check(
+            isinstance(self.name, str) and self.name.isidentifier(),
+            f"road user name must be an identifier (letters, digits, _), got {self.name!r}",
+        )
+        try:
+            object.__setattr__(self, "type", RoadUserType.parse(self.type))
+        except ValueError as error:
+            raise ValueError(f"type: {error}") from None
+        check_finite("road_user", s0=self.s0)
+        check_positive("road_user", length=self.length, width=self.width, mass=self.mass)
+        if self.type is RoadUserType.TRAIN:
+            raise ValueError("type: trains are not supported as road users in mujoco_world")
+
+    @property
+    def shape(self) -> tuple[float, float]:
+        """(length, width) of the footprint [m]."""
+        default = DEFAULT_SHAPES[self.type]
+        return (
+            self.length if self.length is not None else default.length,
+            self.width if self.width is not None else default.width,
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class EgoSpec:
+    """The ego vehicle, driven by the planner.
+
+    Attributes:
+        type: road-user type of the ego.
+        length: [m]. width: [m]. mass: [kg].
+        lane: start lane (from the right in its direction of travel) on the main road.
+        s0: start arc length along its route [m].
+        speed: initial speed [m/s].
+        turn: manoeuvre at an intersection.
+        goal_s: arc length along the route where the goal is reached [m]; None is
+            20 m before the route's end.
+        desired_speed: [m/s]; None uses the road's speed limit.
+    """
+
+    type: RoadUserType = RoadUserType.CAR
+    length: float = EGO_SHAPE.length
+    width: float = EGO_SHAPE.width
+    mass: float = EGO_MASS_KG
+    lane: int = 0
+    s0: float = 10.0
+    speed: float = 10.0
+    turn: Turn = Turn.STRAIGHT
+    goal_s: float | None = None
+    desired_speed: float | None = None
+
+    def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "type", RoadUserType.parse(self.type))
+        except ValueError as error:
+            raise ValueError(f"ego.type: {error}") from None
+        object.__setattr__(self, "turn", parse_enum(Turn, "ego", "turn", self.turn))
+        check_positive("ego", length=self.length, width=self.width, mass=self.mass)
+        check_non_negative("ego", speed=self.speed, desired_speed=self.desired_speed)
+        check_finite("ego", s0=self.s0, goal_s=self.goal_s)
+        check(
+            isinstance(self.lane, int) and self.lane >= 0,
+            f"ego.lane must be an integer >= 0, got {self.lane!r}",
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class RestitutionSpec:
+    """Coefficient of restitution between two road-user types.
+
+    Attributes:
+        a: first type. b: second type (order does not matter).
+        e: restitution in [0.01, 0.75] (mapped to a MuJoCo damping ratio).
+    """
+
+    a: RoadUserType
+    b: RoadUserType
+    e: float
+
+    def __post_init__(self) -> None:
+        for name in ("a", "b"):
+            try:
+                object.__setattr__(self, name, RoadUserType.parse(getattr(self, name)))
+            except ValueError as error:
+                raise ValueError(f"restitution.{name}: {error}") from None
+        check_finite("restitution", e=self.e)
+        check(
+            0.01 <= self.e <= 0.75,
+            f"restitution.e must lie in [0.01, 0.75] (MuJoCo soft contacts), got {self.e}",
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class ContactSpec:
+    """Contact model between bodies.
+
+    Attributes:
+        timeconst: solref time constant [s]; sets pulse length and crush depth.
+        dampratio: solref damping ratio; >= 4 gives near-plastic impacts (e ~ 0.01).
+        friction: sliding friction between bodies.
+        restitution: per pair of types; overrides ``dampratio`` for those pairs.
+    """
+
+    timeconst: float = 0.05
+    dampratio: float = 4.0
+    friction: float = 0.3
+    restitution: tuple[RestitutionSpec, ...] = ()
+
+    def __post_init__(self) -> None:
+        check_positive("contact", timeconst=self.timeconst, dampratio=self.dampratio)
+        check_non_negative("contact", friction=self.friction)
+        check(self.timeconst >= 0.002, "contact.timeconst must be >= 0.002 s (2 time steps)")
+        seen = set()
+        for r in self.restitution:
+            key = frozenset((r.a, r.b))
+            check(key not in seen, f"contact.restitution lists {r.a.value}-{r.b.value} twice")
+            seen.add(key)
+
+
+@dataclass(frozen=True, slots=True)
+class SensorSpec:
+    """What the ego can perceive.
+
+    Attributes:
+        occlusion: hide road users whose centre and corners are all behind other
+            vehicles (as seen from the ego's centre).
+        range: perception range [m] around the ego's centre, or None for unlimited.
+    """
+
+    occlusion: bool = False
+    range: float | None = None
+
+    def __post_init__(self) -> None:
+        check(
+            isinstance(self.occlusion, bool),
+            f"sensor.occlusion must be true or false, got {self.occlusion!r}",
+        )
+        check_positive("sensor", range=self.range)
+
+
+@dataclass(frozen=True, slots=True)
+class Scenario:
+    """A complete scenario.
+
+    Attributes:
+        name: identifier (used for output folders).
+        description: one line.
+        road: road geometry.
+        ego: the planner's vehicle.
+        road_users: everyone else.
+        duration: time limit [s].
+        contact: contact model.
+        sensor: what the ego perceives (occlusion, range).
+    """
+
+    name: str
+    description: str = ""
+    road: RoadSpec = field(default_factory=RoadSpec)
+    ego: EgoSpec = field(default_factory=EgoSpec)
+    road_users: tuple[RoadUserSpec, ...] = ()
+    duration: float = 20.0
+    contact: ContactSpec = field(default_factory=ContactSpec)
+    sensor: SensorSpec = field(default_factory=SensorSpec)
+
+    def __post_init__(self) -> None:
+        check(
+            isinstance(self.name, str)
+            and bool(self.name)
+            and all(c.isalnum() or c in "_-." for c in self.name),
+            f"name must be a non-empty string of letters, digits, _ - ., got {self.name!r}",
+        )
+        check_positive("scenario", duration=self.duration)
+        object.__setattr__(self, "road_users", tuple(self.road_users))
+        names = [u.name for u in self.road_users]
+        duplicates = sorted({n for n in names if names.count(n) > 1})
+        check(not duplicates, f"road_users: duplicate names {duplicates}")
+        check("ego" not in names, "road_users: the name 'ego' is reserved")
+        lanes = self.road.lanes
+        check(self.ego.lane < lanes, f"ego.lane must be < road.lanes ({lanes}), got {self.ego.lane}")
+        if self.road.kind is not RoadKind.INTERSECTION:
+            check(
+                self.ego.turn is Turn.STRAIGHT,
+                "ego.turn is only allowed on an intersection road",
+            )
+        for i, user in enumerate(self.road_users):
+            where = f"road_users[{i}] ({user.name})"
+            route = user.route
+            if route.road is not RoadName.WAYPOINTS:
+                check(
+                    route.lane < lanes,
+                    f"{where}.route.lane must be < road.lanes ({lanes}), got {route.lane}",
+                )
+            if self.road.kind is not RoadKind.INTERSECTION:
+                check(
+                    route.road is not RoadName.CROSS,
+                    f"{where}.route.road 'cross' needs road.kind = 'intersection'",
+                )
+                check(
+                    route.turn is Turn.STRAIGHT,
+                    f"{where}.route.turn is only allowed on an intersection road",
+                )
+
+
+def scenario_from_dict(data: dict[str, Any]) -> Scenario:
+    """Build a scenario from nested dicts (as read from TOML).
+
+    Raises:
+        ValueError: unknown keys or invalid values, naming the field (e.g.
+            ``road_users[2].behaviour.speed``).
+    """
+    return from_mapping(Scenario, data, "")
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Load a scenario from a TOML file.
+
+    Raises:
+        ValueError: unreadable TOML, unknown keys or invalid values; the message names
+            the file and the field.
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            data = tomllib.load(handle)
+    except OSError as error:
+        raise ValueError(f"cannot read scenario file {path}: {error.strerror}") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"{path}: not valid TOML: {error}") from None
+    try:
+        return scenario_from_dict(data)
+    except ValueError as error:
+        raise ValueError(f"{path}: {error}") from None

@@ -1,0 +1,599 @@
+"""Rerun recordings of closed-loop runs (the only module of the project that imports rerun).
+
+``RerunRecorder`` is a ``RunObserver``: attach it to ``run_scenario`` and it writes
+``<out_dir>/recording.rrd`` headless through an explicit ``rr.RecordingStream`` (no
+global recording, no viewer). It flushes every ``RecorderConfig.flush_interval`` of
+simulated time, so an interrupted or failed run still leaves a readable file.
+
+Entities (all in the world frame, z up, road plane z = 0):
+
+* ``world/road/{surface,boundary,lanes,walls}`` (static): drivable area, its outline,
+  lane markings, wall or kerb boxes.
+* ``world/ego`` and ``world/road_users/{boxes,round}`` every logged frame: boxes
+  (Boxes3D with yaw quaternions) and pedestrians as cylinders, coloured by type,
+  labelled ``type #id``; ``world/ego_path``: the executed ego path.
+* ``world/plan/{chosen,candidates}`` and ``world/prediction/{means,sigma1,sigma2}``
+  each planning cycle; ``decision`` holds the decision record as a TextLog.
+* ``series/{risk,collision_probability,harm}/user_<id>``, ``series/ego/{risk,
+  max_acceptable_risk}``, ``series/cost/<term>``, ``series/planning_ms`` and
+  ``series/level``, on the ``sim_time`` and ``cycle`` timelines, sent in columns.
+* ``world/impacts/<n>/{point,force}`` and ``impacts/<n>/<body>/{dv_measured,
+  dv_predicted,harm_measured,harm_predicted}``, plus an ``impacts`` TextLog.
+
+Rerun is imported when the first ``RerunRecorder`` is built, not with this module,
+so the layering check (``mujoco_world`` pulls in no rerun on import) holds.
+
+Timelines: ``sim_time`` (duration [s]) on everything, ``cycle`` (sequence) on the
+planning data.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import shapely
+
+from ethical_planner.planner import Decision
+from ethical_planner.road_users import RoadUserType
+from mujoco_world.evaluation.compare import ImpactRecord
+from mujoco_world.loop.runner import RunObserver, RunSummary
+from mujoco_world.loop.world import World
+from mujoco_world.scenario.fields import check
+from mujoco_world.scenario.road import offset_polyline
+from mujoco_world.scenario.spec import Scenario
+
+if TYPE_CHECKING:
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+
+def _load_rerun() -> None:
+    """Import rerun on first use, so importing ``mujoco_world`` never pulls it in (layering)."""
+    global rr, rrb
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+
+#: File name of a run's recording inside its output folder.
+RECORDING_FILE = "recording.rrd"
+#: RGB colour per road-user type.
+TYPE_COLORS: dict[RoadUserType, tuple[int, int, int]] = {
+    RoadUserType.CAR: (70, 130, 220),
+    RoadUserType.TAXI: (240, 200, 40),
+    RoadUserType.PARKED_VEHICLE: (120, 120, 140),
+    RoadUserType.PRIORITY_VEHICLE: (230, 60, 60),
+    RoadUserType.TRUCK: (150, 90, 40),
+    RoadUserType.BUS: (230, 130, 30),
+    RoadUserType.MOTORCYCLE: (170, 60, 200),
+    RoadUserType.BICYCLE: (40, 190, 120),
+    RoadUserType.PEDESTRIAN: (250, 100, 160),
+    RoadUserType.TRAIN: (90, 90, 90),
+}
+EGO_COLOR = (20, 220, 220)
+#: RGBA colour of candidates per validity level (0, 1, 2, 3, 10).
+LEVEL_COLORS: dict[int, tuple[int, int, int, int]] = {
+    0: (120, 120, 120, 60),
+    1: (220, 40, 40, 90),
+    2: (240, 140, 30, 90),
+    3: (230, 210, 40, 90),
+    10: (60, 200, 80, 110),
+}
+_ELLIPSE_POINTS = 25
+_Z_LINE = 0.05  # lines slightly above the road surface [m]
+
+
+@dataclass(frozen=True, slots=True)
+class RecorderConfig:
+    """What a ``RerunRecorder`` logs and how often.
+
+    Attributes:
+        frame_rate: body poses per simulated second [Hz] (rounded to whole physics steps).
+        candidates: candidates logged per cycle; None logs all of them.
+        prediction_stride: every how many prediction steps an ellipse is drawn (>= 1).
+        flush_interval: simulated time between flushes of the file [s].
+        application_id: Rerun application id.
+    """
+
+    frame_rate: float = 20.0
+    candidates: int | None = None
+    prediction_stride: int = 5
+    flush_interval: float = 1.0
+    application_id: str = "ethical_trajectory_planning"
+
+    def __post_init__(self) -> None:
+        check(
+            isinstance(self.frame_rate, int | float)
+            and math.isfinite(self.frame_rate)
+            and self.frame_rate > 0,
+            f"recorder.frame_rate must be a finite number > 0 Hz, got {self.frame_rate!r}",
+        )
+        check(
+            self.candidates is None or (isinstance(self.candidates, int) and self.candidates >= 0),
+            f"recorder.candidates must be None (all) or an integer >= 0, got {self.candidates!r}",
+        )
+        check(
+            isinstance(self.prediction_stride, int) and self.prediction_stride >= 1,
+            f"recorder.prediction_stride must be an integer >= 1, got {self.prediction_stride!r}",
+        )
+        check(
+            isinstance(self.flush_interval, int | float) and self.flush_interval > 0,
+            f"recorder.flush_interval must be > 0 s, got {self.flush_interval!r}",
+        )
+        check(bool(self.application_id), "recorder.application_id must be a non-empty string")
+
+
+def yaw_quaternions(yaw: np.ndarray) -> np.ndarray:
+    """Quaternions (x, y, z, w) of rotations about +z by ``yaw`` [rad], shape (n,) -> (n, 4)."""
+    half = 0.5 * np.asarray(yaw, dtype=float)
+    zeros = np.zeros_like(half)
+    return np.column_stack([zeros, zeros, np.sin(half), np.cos(half)])
+
+
+def ellipse_strips(mean: np.ndarray, cov: np.ndarray, scale: float, n: int = _ELLIPSE_POINTS) -> np.ndarray:
+    """Outlines of the ``scale``-sigma ellipses of 2D Gaussians.
+
+    Args:
+        mean: centres [m], shape (m, 2).
+        cov: covariances [m^2], shape (m, 2, 2).
+        scale: number of standard deviations.
+        n: points per closed outline.
+
+    Returns:
+        Points [m], shape (m, n, 2); the first and last point coincide.
+    """
+    values, vectors = np.linalg.eigh(cov)  # (m, 2), (m, 2, 2)
+    axes = vectors * (scale * np.sqrt(np.clip(values, 0.0, None)))[:, None, :]
+    phi = np.linspace(0.0, 2.0 * math.pi, n)
+    unit = np.stack([np.cos(phi), np.sin(phi)])  # (2, n)
+    return mean[:, None, :] + np.einsum("mij,jn->mni", axes, unit)
+
+
+def _to3(points: np.ndarray, z: float = _Z_LINE) -> np.ndarray:
+    """Append a constant z to (..., 2) points."""
+    return np.concatenate([points, np.full(points.shape[:-1] + (1,), z)], axis=-1)
+
+
+def _rgb(t: RoadUserType) -> tuple[int, int, int]:
+    return TYPE_COLORS.get(t, (200, 200, 200))
+
+
+def _finite(value: float) -> float:
+    return float(value) if math.isfinite(value) else math.nan
+
+
+class _SeriesBuffer:
+    """Scalars kept per entity until they are sent as columns."""
+
+    def __init__(self) -> None:
+        self.time: dict[str, list[float]] = defaultdict(list)
+        self.cycle: dict[str, list[int]] = defaultdict(list)
+        self.value: dict[str, list[float]] = defaultdict(list)
+
+    def add(self, path: str, t: float, cycle: int | None, value: float) -> None:
+        self.time[path].append(t)
+        self.cycle[path].append(-1 if cycle is None else cycle)
+        self.value[path].append(float(value))
+
+    def send(self, rec: rr.RecordingStream) -> None:
+        for path, times in self.time.items():
+            if not times:
+                continue
+            indexes = [rr.TimeColumn("sim_time", duration=np.asarray(times))]
+            cycles = self.cycle[path]
+            if cycles[0] >= 0:
+                indexes.append(rr.TimeColumn("cycle", sequence=np.asarray(cycles, dtype=np.int64)))
+            rec.send_columns(
+                path, indexes=indexes, columns=rr.Scalars.columns(scalars=np.asarray(self.value[path]))
+            )
+        self.time.clear()
+        self.cycle.clear()
+        self.value.clear()
+
+
+class RerunRecorder(RunObserver):
+    """Writes a Rerun recording of one run (see the module docstring for its content).
+
+    Args:
+        out_dir: folder of the run; the recording is ``out_dir / "recording.rrd"``.
+        config: what to log.
+        recording_id: Rerun recording id (default: the folder's name).
+
+    Attributes:
+        path: the recording file.
+        cycle: planning cycles seen so far.
+    """
+
+    def __init__(
+        self, out_dir: str | Path, config: RecorderConfig | None = None, recording_id: str | None = None
+    ) -> None:
+        _load_rerun()
+        self.config = config or RecorderConfig()
+        self.out_dir = Path(out_dir)
+        self.path = self.out_dir / RECORDING_FILE
+        self.recording_id = recording_id or self.out_dir.resolve().name
+        self.rec: rr.RecordingStream | None = None
+        self.cycle = 0
+        self.step_interval = 50
+        self._series = _SeriesBuffer()
+        self._path_xy: list[np.ndarray] = []
+        self._next_flush = 0.0
+        self._impacts = 0
+        self._rng = np.random.default_rng(0)  # candidate subsampling only, fixed for reproducibility
+        self._closed = False
+
+    # ------------------------------------------------------------------ hooks
+
+    def on_start(self, world: World, scenario: Scenario, planner: str, seed: int) -> None:
+        """Open the stream, write the blueprint and the static scene."""
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.step_interval = max(int(round(1.0 / (self.config.frame_rate * world.scene.dt))), 1)
+        rec = rr.RecordingStream(self.config.application_id, recording_id=self.recording_id)
+        rec.save(self.path, default_blueprint=self._blueprint(world))
+        self.rec = rec
+        self._world_static(world, scenario, planner, seed)
+        self._bodies = _BodyLayout(world)
+        self._log_body_shapes()
+        rec.set_time("sim_time", duration=world.time)
+        self._log_bodies(world)
+        self._next_flush = world.time + self.config.flush_interval
+        rec.flush()
+
+    def on_step(self, world: World, time: float) -> None:
+        """Log every body's pose (called at the recorder's frame rate)."""
+        if self.rec is None:
+            return
+        self.rec.set_time("sim_time", duration=time)
+        self._log_bodies(world)
+        if time >= self._next_flush:
+            self._flush()
+            self._next_flush = time + self.config.flush_interval
+
+    def on_cycle(self, decision: Decision, time: float) -> None:
+        """Log the plan, the candidates, the prediction, the decision record and the series."""
+        rec = self.rec
+        if rec is None:
+            return
+        rec.set_time("sim_time", duration=time)
+        rec.set_time("cycle", sequence=self.cycle)
+        traj = decision.trajectory
+        rec.log(
+            "world/plan/chosen",
+            rr.LineStrips3D(
+                [_to3(np.column_stack([traj.x, traj.y]), 2 * _Z_LINE)], colors=[EGO_COLOR], radii=0.12
+            ),
+        )
+        self._log_candidates(decision)
+        self._log_prediction(decision)
+        rec.log("decision", rr.TextLog(decision.summary(), level="INFO" if decision.level == 10 else "WARN"))
+        s, c = self._series, self.cycle
+        for u in decision.road_users:
+            s.add(f"series/risk/user_{u.id}", time, c, u.risk)
+            s.add(f"series/collision_probability/user_{u.id}", time, c, u.collision_probability)
+            s.add(f"series/harm/user_{u.id}", time, c, u.harm)
+        s.add("series/ego/risk", time, c, decision.ego_combined_risk)
+        s.add("series/ego/max_acceptable_risk", time, c, decision.max_acceptable_risk)
+        for name, value in decision.costs.items():
+            if math.isfinite(value):
+                s.add(f"series/cost/{name}", time, c, value)
+        s.add("series/planning_ms", time, c, float(sum(decision.timings_ms.values())))
+        s.add("series/level", time, c, float(decision.level))
+        self.cycle += 1
+        rec.disable_timeline("cycle")  # body poses between cycles carry sim_time only
+
+    def on_impact(self, record: ImpactRecord) -> None:
+        """Log the contact point, the force arrow, delta-v and harm (measured and predicted)."""
+        rec = self.rec
+        if rec is None:
+            return
+        m = record.measurement
+        k = self._impacts
+        self._impacts += 1
+        rec.set_time("sim_time", duration=m.time)
+        points, vectors, labels = [], [], []
+        lines = [f"impact {k} at t = {m.time:.3f} s: {m.a.name} ({m.a.type}) - {m.b.name} ({m.b.type})"]
+        for body, comp in ((m.a, record.a), (m.b, record.b)):
+            if body.is_static:
+                continue
+            c, s_ = math.cos(body.yaw), math.sin(body.yaw)
+            px = body.position[0] + c * body.contact_point[0] - s_ * body.contact_point[1]
+            py = body.position[1] + s_ * body.contact_point[0] + c * body.contact_point[1]
+            impulse = np.asarray(body.impulse, dtype=float)
+            norm = float(np.hypot(*impulse))
+            direction = impulse / norm if norm > 0 else np.zeros(2)
+            points.append((px, py, 0.5))
+            vectors.append((*(direction * max(comp.dv_measured, 0.5)), 0.0))
+            label = (
+                f"{body.name}: dv {comp.dv_measured:.2f} m/s (pred {comp.dv_predicted:.2f}), "
+                f"area {comp.area_measured} (pred {comp.area_predicted}), "
+                f"harm {comp.harm_measured:.3f} (pred {comp.harm_predicted:.3f})"
+            )
+            labels.append(label)
+            lines.append("  " + label)
+            base = f"impacts/{k}/{body.name}"
+            for name, value in (
+                ("dv_measured", comp.dv_measured),
+                ("dv_predicted", comp.dv_predicted),
+                ("harm_measured", comp.harm_measured),
+                ("harm_predicted", comp.harm_predicted),
+            ):
+                rec.log(f"{base}/{name}", rr.Scalars(_finite(value)))
+        if points:
+            rec.log(
+                f"world/impacts/{k}/point",
+                rr.Points3D(points, radii=0.3, colors=[(255, 0, 0)], labels=labels),
+            )
+            rec.log(
+                f"world/impacts/{k}/force",
+                rr.Arrows3D(origins=points, vectors=vectors, colors=[(255, 60, 0)], radii=0.08),
+            )
+        rec.log("impacts", rr.TextLog("\n".join(lines), level="ERROR"))
+        rec.flush()
+
+    def on_end(self, summary: RunSummary) -> None:
+        """Log the final path and the outcome, then close the file."""
+        rec = self.rec
+        if rec is None or self._closed:
+            return
+        rec.set_time("sim_time", duration=summary.duration)
+        rec.log(
+            "decision",
+            rr.TextLog(f"run ended: {summary.outcome} ({summary.reason})", level="INFO"),
+        )
+        self.close()
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def close(self) -> None:
+        """Send what is buffered and close the file (idempotent)."""
+        if self.rec is None or self._closed:
+            return
+        self._flush()
+        self.rec.disconnect()
+        self._closed = True
+
+    def _stream(self) -> rr.RecordingStream:
+        if self.rec is None:
+            raise RuntimeError("RerunRecorder: on_start has not been called")
+        return self.rec
+
+    def _flush(self) -> None:
+        rec = self.rec
+        if rec is None:
+            return
+        if self._path_xy:
+            rec.log(
+                "world/ego_path",
+                rr.LineStrips3D([_to3(np.asarray(self._path_xy))], colors=[EGO_COLOR], radii=0.06),
+            )
+        self._series.send(rec)
+        rec.flush()
+
+    # ------------------------------------------------------------------ content
+
+    def _world_static(self, world: World, scenario: Scenario, planner: str, seed: int) -> None:
+        rec = self._stream()
+        road = world.road
+        area = road.drivable_area
+        try:
+            triangles = shapely.constrained_delaunay_triangles(area)
+            tri = np.asarray([np.asarray(t.exterior.coords)[:3] for t in triangles.geoms])
+            vertices = _to3(tri.reshape(-1, 2), 0.0)
+            rec.log(
+                "world/road/surface",
+                rr.Mesh3D(
+                    vertex_positions=vertices,
+                    triangle_indices=np.arange(len(vertices)).reshape(-1, 3),
+                    albedo_factor=(60, 60, 66, 255),
+                ),
+                static=True,
+            )
+        except (AttributeError, ValueError):  # older shapely or a degenerate area: outline only
+            pass
+        rings = [np.asarray(area.exterior.coords)] + [np.asarray(r.coords) for r in area.interiors]
+        rec.log(
+            "world/road/boundary",
+            rr.LineStrips3D([_to3(r) for r in rings], colors=[(240, 240, 240)], radii=0.08),
+            static=True,
+        )
+        spec = road.spec
+        lanes = []
+        for line in (road.main_line, road.cross_line):
+            if line is None:
+                continue
+            for i in range(spec.lanes + 1):
+                lanes.append(_to3(offset_polyline(line, -spec.half_width + i * spec.lane_width)))
+        rec.log("world/road/lanes", rr.LineStrips3D(lanes, colors=[(250, 250, 200)], radii=0.05), static=True)
+        boxes = road.static_boxes()
+        if boxes:
+            rec.log(
+                "world/road/walls",
+                rr.Boxes3D(
+                    centers=[(b.center[0], b.center[1], b.half_height) for b in boxes],
+                    half_sizes=[(b.half_length, b.half_width, b.half_height) for b in boxes],
+                    quaternions=yaw_quaternions(np.array([b.yaw for b in boxes])),
+                    colors=[(160, 160, 160)],
+                    fill_mode="solid",
+                ),
+                static=True,
+            )
+        rec.log(
+            "run",
+            rr.TextDocument(
+                f"# {scenario.name}\n\n{scenario.description}\n\nplanner: {planner}, seed: {seed}, "
+                f"road users: {world.n - 1}",
+                media_type="text/markdown",
+            ),
+            static=True,
+        )
+        series_style = [
+            ("series/ego/risk", (20, 220, 220)),
+            ("series/ego/max_acceptable_risk", (255, 60, 60)),
+        ]
+        for path, color in series_style:
+            rec.log(path, rr.SeriesLines(colors=[color], names=[path.rsplit("/", 1)[-1]]), static=True)
+        for i in range(1, world.n):
+            name = f"{world.types[i].value} #{i}"
+            color = _rgb(world.types[i])
+            for kind in ("risk", "collision_probability", "harm"):
+                rec.log(f"series/{kind}/user_{i}", rr.SeriesLines(colors=[color], names=[name]), static=True)
+
+    def _log_body_shapes(self) -> None:
+        """Sizes, colours and labels once, as static data; frames then carry poses only."""
+        rec = self._stream()
+        layout = self._bodies
+        rec.log(
+            "world/ego",
+            rr.Boxes3D.from_fields(
+                half_sizes=layout.half_sizes[:1],
+                colors=[EGO_COLOR],
+                labels=[layout.labels[0]],
+                fill_mode="solid",
+            ),
+            static=True,
+        )
+        boxes, round_ = layout.boxes, layout.round
+        if len(boxes):
+            rec.log(
+                "world/road_users/boxes",
+                rr.Boxes3D.from_fields(
+                    half_sizes=layout.half_sizes[boxes],
+                    colors=layout.colors[boxes],
+                    labels=[layout.labels[i] for i in boxes],
+                    fill_mode="solid",
+                ),
+                static=True,
+            )
+        if len(round_):
+            rec.log(
+                "world/road_users/round",
+                rr.Cylinders3D.from_fields(
+                    lengths=2.0 * layout.z[round_],
+                    radii=layout.radius[round_],
+                    colors=layout.colors[round_],
+                    labels=[layout.labels[i] for i in round_],
+                    fill_mode="solid",
+                ),
+                static=True,
+            )
+
+    def _log_bodies(self, world: World) -> None:
+        rec = self._stream()
+        layout = self._bodies
+        qpos = world.scene.qpos
+        centers = np.column_stack([qpos[:, :2], layout.z])
+        quaternions = yaw_quaternions(qpos[:, 2])
+        self._path_xy.append(qpos[0, :2].copy())
+        rec.log("world/ego", rr.Boxes3D.from_fields(centers=centers[:1], quaternions=quaternions[:1]))
+        boxes, round_ = layout.boxes, layout.round
+        if len(boxes):
+            rec.log(
+                "world/road_users/boxes",
+                rr.Boxes3D.from_fields(centers=centers[boxes], quaternions=quaternions[boxes]),
+            )
+        if len(round_):
+            rec.log("world/road_users/round", rr.Cylinders3D.from_fields(centers=centers[round_]))
+
+    def _log_candidates(self, decision: Decision) -> None:
+        rec = self._stream()
+        cx, cy = decision.candidate_x, decision.candidate_y
+        levels = np.asarray(decision.candidate_levels)
+        n = len(cx)
+        limit = self.config.candidates
+        if n == 0 or limit == 0:
+            return
+        index = np.arange(n)
+        if limit is not None and n > limit:
+            index = np.sort(self._rng.choice(n, size=limit, replace=False))
+        strips = _to3(np.stack([cx[index], cy[index]], axis=-1))
+        palette = np.array([LEVEL_COLORS.get(int(v), (200, 200, 200, 80)) for v in range(11)], dtype=np.uint8)
+        colors = palette[np.clip(levels[index].astype(int), 0, 10)]
+        rec.log("world/plan/candidates", rr.LineStrips3D(strips, colors=colors, radii=0.02))
+
+    def _log_prediction(self, decision: Decision) -> None:
+        rec = self._stream()
+        pred = decision.prediction
+        mean = np.asarray(pred.mean)
+        if mean.size == 0:
+            rec.log("world/prediction", rr.Clear(recursive=True))
+            return
+        k, n_t = mean.shape[:2]
+        colors = [_rgb(t) for t in pred.types]
+        rec.log(
+            "world/prediction/means",
+            rr.LineStrips3D(
+                _to3(mean),
+                colors=colors,
+                radii=0.05,
+                labels=[f"#{int(i)}" for i in pred.ids],
+                show_labels=False,
+            ),
+        )
+        steps = np.arange(self.config.prediction_stride, n_t, self.config.prediction_stride)
+        if steps.size == 0:
+            steps = np.array([n_t - 1])
+        m = mean[:, steps].reshape(-1, 2)
+        cov = np.asarray(pred.cov)[:, steps].reshape(-1, 2, 2)
+        ellipse_colors = np.repeat(np.asarray(colors, dtype=np.uint8), len(steps), axis=0)
+        for scale, name in ((1.0, "sigma1"), (2.0, "sigma2")):
+            rec.log(
+                f"world/prediction/{name}",
+                rr.LineStrips3D(
+                    _to3(ellipse_strips(m, cov, scale)),
+                    colors=ellipse_colors,
+                    radii=0.03 if scale == 1.0 else 0.015,
+                ),
+            )
+
+    def _blueprint(self, world: World) -> rrb.Blueprint:
+        lo = np.asarray(world.road.drivable_area.bounds[:2])
+        hi = np.asarray(world.road.drivable_area.bounds[2:])
+        centre = 0.5 * (lo + hi)
+        height = float(max(hi - lo)) * 0.9 + 10.0
+        view = rrb.Spatial3DView(
+            origin="world",
+            name="top-down",
+            eye_controls=rrb.EyeControls3D(
+                position=[float(centre[0]), float(centre[1]) - 1.0, height],
+                look_target=[float(centre[0]), float(centre[1]), 0.0],
+                eye_up=[0.0, 0.0, 1.0],
+            ),
+        )
+        return rrb.Blueprint(
+            rrb.Horizontal(
+                rrb.Vertical(
+                    view,
+                    rrb.TextLogView(origin="/", contents=["decision", "impacts"], name="decisions"),
+                    row_shares=[3, 1],
+                ),
+                rrb.Vertical(
+                    rrb.TimeSeriesView(origin="series/risk", name="risk per road user"),
+                    rrb.TimeSeriesView(origin="series/collision_probability", name="collision probability"),
+                    rrb.TimeSeriesView(origin="series/ego", name="ego risk vs R_max"),
+                    rrb.TimeSeriesView(origin="series/cost", name="principle costs"),
+                    rrb.TimeSeriesView(origin="series/planning_ms", name="planning time [ms]"),
+                ),
+                column_shares=[3, 2],
+            ),
+            collapse_panels=True,
+        )
+
+
+class _BodyLayout:
+    """Per-body constants for logging, computed once: sizes, colours, labels."""
+
+    def __init__(self, world: World) -> None:
+        bodies = world.scene.bodies
+        self.round = np.array([i for i in range(1, world.n) if bodies[i].is_round], dtype=int)
+        self.boxes = np.array([i for i in range(1, world.n) if not bodies[i].is_round], dtype=int)
+        self.z = np.array([0.5 * b.height for b in bodies])
+        self.half_sizes = np.column_stack([0.5 * world.lengths, 0.5 * world.widths, self.z])
+        self.radius = np.array([b.radius if b.is_round else 0.0 for b in bodies])
+        self.colors = np.array([EGO_COLOR] + [_rgb(t) for t in world.types[1:]], dtype=np.uint8)
+        self.labels = ["ego #0"] + [
+            f"{world.types[i].value} #{i} {bodies[i].name}" for i in range(1, world.n)
+        ]

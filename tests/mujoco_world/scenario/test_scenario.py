@@ -1,0 +1,185 @@
+"""Scenario records, TOML loading, road geometry, catalog and generator."""
+
+import dataclasses
+import math
+from importlib import resources
+
+import numpy as np
+import pytest
+import shapely
+
+from mujoco_world.loop.world import World
+from mujoco_world.scenario.catalog import (
+    catalog_names,
+    generate_scenarios,
+    generated_names,
+    get_scenario,
+    random_scenario,
+    scenario_by_name,
+)
+from mujoco_world.scenario.road import build_road
+from mujoco_world.scenario.spec import RoadSpec, RouteSpec, Scenario, load_scenario, scenario_from_dict
+
+EXAMPLE = resources.files("mujoco_world").joinpath("data", "example_scenario.toml")
+
+
+def minimal(**overrides):
+    data = {
+        "name": "t",
+        "road": {"length": 100.0},
+        "ego": {"s0": 5.0, "speed": 5.0},
+        "road_users": [
+            {"name": "car", "type": "car", "s0": 40.0, "behaviour": {"kind": "scripted", "speed": 5.0}}
+        ],
+    }
+    data.update(overrides)
+    return data
+
+
+def test_example_file_loads_and_builds():
+    scenario = load_scenario(str(EXAMPLE))
+    assert scenario.name == "example_cut_in"
+    assert [u.name for u in scenario.road_users] == ["cutter", "leader", "cyclist"]
+    assert scenario.road_users[1].behaviour.idm.reaction_time == 0.3
+    World(scenario)
+
+
+@pytest.mark.parametrize(
+    ("patch", "message"),
+    [
+        ({"roads": {}}, "unknown key 'roads'"),
+        ({"road": {"lenght": 3}}, r"road: unknown key 'lenght'"),
+        ({"road": {"lanes": 0}}, r"road.lanes must be an integer in 1..8"),
+        ({"road": {"kind": "roundabout"}}, r"road.kind: unknown value 'roundabout'"),
+        ({"ego": {"speed": -1.0}}, r"ego.speed must be >= 0"),
+        ({"duration": float("nan")}, r"scenario.duration must be a finite number"),
+        (
+            {"road_users": [{"name": "x", "type": "car", "behaviour": {"kind": "idm", "sped": 3}}]},
+            r"road_users\[0\].behaviour: unknown key 'sped'",
+        ),
+        (
+            {"road_users": [{"name": "x", "type": "spaceship"}]},
+            r"road_users\[0\]: type: unknown road-user type 'spaceship'",
+        ),
+        (
+            {"road_users": [{"name": "x", "type": "car", "behaviour": {"speed_profile": [[2, 1], [1, 2]]}}]},
+            r"road_users\[0\].behaviour.speed_profile times must be >= 0 and strictly increasing",
+        ),
+        (
+            {"road_users": [{"name": "x", "type": "car", "route": {"lane": 5}}]},
+            r"road_users\[0\] \(x\).route.lane must be < road.lanes",
+        ),
+        (
+            {"road_users": [{"name": "x", "type": "car", "route": {"road": "cross"}}]},
+            r"needs road.kind = 'intersection'",
+        ),
+        (
+            {"road_users": [{"name": "x", "type": "car", "behaviour": {"kind": "scripted", "idm": {}}}]},
+            r"road_users\[0\].behaviour.idm is only allowed with kind 'idm'",
+        ),
+        ({"road_users": [{"name": "a", "type": "car"}, {"name": "a", "type": "car", "s0": 30}]}, "duplicate"),
+        (
+            {"contact": {"restitution": [{"a": "car", "b": "car", "e": 0.99}]}},
+            r"contact.restitution\[0\].e must lie",
+        ),
+    ],
+)
+def test_invalid_scenarios_name_the_field(patch, message):
+    with pytest.raises(ValueError, match=message):
+        scenario_from_dict(minimal(**patch))
+
+
+def test_invalid_file_names_the_file_and_field(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text('name = "bad"\n[ego]\nspeed = "fast"\n')
+    with pytest.raises(ValueError, match=r"bad.toml: ego.speed must be a finite number, got .fast."):
+        load_scenario(path)
+    path.write_text("name = \n")
+    with pytest.raises(ValueError, match="not valid TOML"):
+        load_scenario(path)
+    with pytest.raises(ValueError, match="cannot read"):
+        load_scenario(tmp_path / "missing.toml")
+
+
+def test_overlapping_start_is_rejected():
+    data = minimal(road_users=[{"name": "car", "type": "car", "s0": 7.0}])
+    with pytest.raises(ValueError, match="ego and car overlap at the start"):
+        World(scenario_from_dict(data))
+
+
+@pytest.mark.parametrize("kind", ["straight", "curved", "intersection"])
+def test_routes_lie_in_the_drivable_area(kind):
+    road = build_road(RoadSpec(kind=kind, length=200.0))
+    area = road.drivable_area.buffer(1e-6)
+    for lane in range(road.spec.lanes):
+        for direction in (1, -1):
+            turns = ("straight", "left", "right") if kind == "intersection" else ("straight",)
+            for turn in turns:
+                line = road.route(RouteSpec(lane=lane, direction=direction, turn=turn))
+                assert area.contains(shapely.LineString(line)), (lane, direction, turn)
+    # Walls and kerbs sit outside the drivable area.
+    for box in road.static_boxes():
+        assert not road.drivable_area.buffer(-0.01).contains(shapely.Point(box.center))
+
+
+def test_curved_road_turns_by_its_angle():
+    road = build_road(RoadSpec(kind="curved", length=200.0, radius=50.0, curve_angle=90.0, lead_in=20.0))
+    end = road.main_line[-1] - road.main_line[-2]
+    assert math.degrees(math.atan2(end[1], end[0])) == pytest.approx(90.0, abs=0.5)
+
+
+def test_catalog_has_the_classics():
+    names = catalog_names()
+    assert len(names) >= 8
+    for required in (
+        "overtake_cyclist",
+        "pedestrian_behind_parked",
+        "highway_cut_in",
+        "tailgater_sudden_stop",
+        "red_light_runner",
+        "turning_truck_cyclist",
+        "oncoming_drift",
+        "dense_urban",
+    ):
+        assert required in names
+    assert len(get_scenario("dense_urban").road_users) >= 18
+
+
+@pytest.mark.parametrize("name", catalog_names())
+def test_catalog_scenarios_build(name):
+    world = World(get_scenario(name))
+    assert world.n == 1 + len(world.scenario.road_users)
+
+
+def test_generator_is_reproducible_and_varied():
+    first = list(generate_scenarios(18, seed=3))
+    again = list(generate_scenarios(18, seed=3))
+    other = list(generate_scenarios(18, seed=4))
+    assert first == again
+    assert first != other
+    assert {s.name.split("-")[0] for s in first} == set(catalog_names())
+    # Any scenario can be rebuilt alone from (seed, index).
+    rebuilt = random_scenario(first[5].name.split("-")[0], np.random.default_rng([3, 5]), name=first[5].name)
+    assert rebuilt == first[5]
+
+
+def test_generated_names_rebuild_their_scenarios():
+    names = generated_names(12, seed=9, families=["oncoming_drift", "dense_urban"])
+    scenarios = list(generate_scenarios(12, seed=9, families=["oncoming_drift", "dense_urban"]))
+    assert [s.name for s in scenarios] == names
+    assert scenario_by_name(names[7]) == scenarios[7]
+    assert scenario_by_name("dense_urban") == get_scenario("dense_urban")
+    with pytest.raises(ValueError, match="unknown scenario 'warp_drive'"):
+        scenario_by_name("warp_drive-s1-2")
+
+
+def test_random_scenarios_build_without_overlap():
+    for scenario in generate_scenarios(27, seed=11):
+        World(scenario)
+
+
+def test_scenarios_are_frozen():
+    scenario = get_scenario("oncoming_drift")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        scenario.duration = 3.0  # type: ignore[misc]
+    assert isinstance(scenario, Scenario)
