@@ -1,2 +1,5 @@
-"""Agents: the behaviours of the other road users (scripted, car following, crossing
-pedestrians, rule violators)."""
+"""Agents.
+
+The behaviours of the other road users (scripted, car following, crossing
+pedestrians, rule violators).
+"""

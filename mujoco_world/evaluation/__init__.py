@@ -1,1 +1,4 @@
-"""Evaluation: a measured impact held against the harm model's prediction (``compare``)."""
+"""Evaluation.
+
+A measured impact held against the harm model's prediction (``compare``).
+"""

@@ -1,2 +1,5 @@
-"""Physics: the MuJoCo scene of planar body proxies (``scene``), impact measurement from
-contact forces (``impact``) and the force controllers that drive bodies (``control``)."""
+"""Physics.
+
+The MuJoCo scene of planar body proxies (``scene``), impact measurement from
+contact forces (``impact``) and the force controllers that drive bodies (``control``).
+"""
