@@ -193,6 +193,80 @@ class LegalCorridor:
             _require_finite("LegalCorridor", stop_distance=self.stop_distance)
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class MotionHistory:
+    """Recent observed motion of a road user's centre, sampled at a fixed step.
+
+    Times are seconds relative to the observation the history belongs to: all
+    ``<= 0``, strictly increasing by ``step`` (within 1e-6 s); the last sample is at
+    most one step old (a world samples on its own grid, between two samples the
+    current state is newer). A history of one sample is allowed (just appeared).
+
+    Attributes:
+        times: [s], shape (n,), n >= 1.
+        positions: centre [m], shape (n, 2).
+        headings: [rad], shape (n,).
+        speeds: along the heading [m/s], shape (n,).
+    """
+
+    times: np.ndarray
+    positions: np.ndarray
+    headings: np.ndarray
+    speeds: np.ndarray
+
+    def __post_init__(self) -> None:
+        arrays = {}
+        for name in ("times", "positions", "headings", "speeds"):
+            try:
+                value = np.array(getattr(self, name), dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"MotionHistory.{name} must be numeric, got {getattr(self, name)!r}"
+                ) from None
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+            arrays[name] = value
+        n = arrays["times"].shape[0] if arrays["times"].ndim == 1 else -1
+        expected = {"times": (n,), "positions": (n, 2), "headings": (n,), "speeds": (n,)}
+        if n < 1:
+            raise ValueError(
+                f"MotionHistory.times must have shape (n,) with n >= 1, got {arrays['times'].shape}"
+            )
+        for name, shape in expected.items():
+            if arrays[name].shape != shape:
+                raise ValueError(f"MotionHistory.{name} must have shape {shape}, got {arrays[name].shape}")
+            if not np.all(np.isfinite(arrays[name])):
+                raise ValueError(f"MotionHistory.{name} must be finite (found NaN or inf)")
+        times = arrays["times"]
+        if times[-1] > 1e-9:
+            raise ValueError(f"MotionHistory.times must be <= 0 s (the past), got last {times[-1]:.6g}")
+        if n > 1:
+            steps = np.diff(times)
+            if steps.min() <= 0 or steps.max() - steps.min() > 1e-6:
+                raise ValueError(
+                    "MotionHistory.times must increase by one fixed step, got steps between "
+                    f"{steps.min():.6g} and {steps.max():.6g} s"
+                )
+            if times[-1] < -steps[0] - 1e-6:
+                raise ValueError(
+                    f"MotionHistory: the last sample ({times[-1]:.6g} s) is older than one step "
+                    f"({steps[0]:.6g} s)"
+                )
+
+    @property
+    def step(self) -> float | None:
+        """Sampling step [s], or None for a single sample."""
+        return float(self.times[1] - self.times[0]) if len(self.times) > 1 else None
+
+    @property
+    def duration(self) -> float:
+        """Time from the oldest sample to now [s]."""
+        return float(-self.times[0])
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+
 @dataclass(frozen=True, slots=True)
 class RoadUser:
     """Another road user as the planner observes it.
@@ -205,6 +279,7 @@ class RoadUser:
         mass: [kg]; defaults to ``mass_of(type, length, width)``.
         legal: its legal corridor, or None to derive one from the road (see
             ``ethical_planner.responsibility``).
+        history: its recent observed motion (for learned predictors), or None.
     """
 
     id: int
@@ -213,9 +288,13 @@ class RoadUser:
     shape: Shape
     mass: float = field(default=float("nan"))
     legal: LegalCorridor | None = None
+    history: MotionHistory | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "type", RoadUserType.parse(self.type))
+        if self.history is not None and not isinstance(self.history, MotionHistory):
+            kind = type(self.history).__name__
+            raise ValueError(f"RoadUser.history must be a MotionHistory or None, got {kind}")
         if math.isnan(self.mass):
             object.__setattr__(self, "mass", mass_of(self.type, self.shape.length, self.shape.width))
         _require_finite("RoadUser", mass=self.mass)
@@ -223,7 +302,11 @@ class RoadUser:
             raise ValueError(f"RoadUser.mass must be > 0 kg, got {self.mass}")
 
     def advanced(self, dt: float) -> RoadUser:
-        """The same road user ``dt`` [s] later at constant speed and turn rate."""
+        """The same road user ``dt`` [s] later at constant speed and turn rate.
+
+        The history moves back by ``dt`` and gains the state it leaves (kept at the
+        history's step; a history of one sample gets ``dt`` as its step).
+        """
         state = self.state
         yaw = state.yaw + state.yaw_rate * dt
         mid = state.yaw + 0.5 * state.yaw_rate * dt
@@ -233,7 +316,31 @@ class RoadUser:
             y=state.y + state.v * dt * math.sin(mid),
             yaw=yaw,
         )
-        return replace(self, state=moved)
+        return replace(self, state=moved, history=self._history_after(dt))
+
+    def _history_after(self, dt: float) -> MotionHistory | None:
+        history = self.history
+        if history is None:
+            return None
+        step = history.step or dt
+        times = history.times - dt
+        # Samples of the history grid that the advance passed, filled at constant velocity.
+        new_times = np.arange(times[-1] + step, 1e-9, step)
+        if len(new_times) == 0 and times[-1] < -step - 1e-9:
+            new_times = np.array([times[-1] + step])
+        since = new_times + dt  # seconds after the current state
+        state = self.state
+        heading = state.yaw + state.yaw_rate * since
+        mid = state.yaw + 0.5 * state.yaw_rate * since
+        new_pos = np.stack(
+            [state.x + state.v * since * np.cos(mid), state.y + state.v * since * np.sin(mid)], axis=-1
+        )
+        return MotionHistory(
+            np.concatenate([times, new_times]),
+            np.concatenate([history.positions, new_pos]),
+            np.concatenate([history.headings, heading]),
+            np.concatenate([history.speeds, np.full(len(new_times), state.v)]),
+        )
 
     @property
     def is_vulnerable(self) -> bool:

@@ -17,7 +17,7 @@ import numpy as np
 
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.reference_path import ReferencePath
-from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, RoadUser, Shape
+from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
 from mujoco_world.agents.behaviour import Fleet, WorldView
 from mujoco_world.physics.control import ControlConfig, TrajectoryReference, brake_forces, tracking_forces
 from mujoco_world.physics.impact import ImpactMeasurement, ImpactRecorder
@@ -65,6 +65,9 @@ class World:
         behaviour_tick: period of the road users' decisions [s].
         timestep: physics step [s].
         control_interval: physics steps between controller updates (held in between).
+        history_step: period [s] at which the world samples every body's motion for
+            the observed ``RoadUser.history`` (a multiple of ``timestep``).
+        history_length: samples kept per body (the current one included).
 
     Raises:
         ValueError: the scenario places bodies overlapping at the start or routes
@@ -78,9 +81,19 @@ class World:
         behaviour_tick: float = 0.05,
         timestep: float = 0.001,
         control_interval: int = 10,
+        history_step: float = 0.1,
+        history_length: int = 31,
     ) -> None:
         if not (isinstance(control_interval, int) and control_interval >= 1):
             raise ValueError(f"control_interval must be an integer >= 1, got {control_interval!r}")
+        if not (isinstance(history_length, int) and history_length >= 1):
+            raise ValueError(f"history_length must be an integer >= 1, got {history_length!r}")
+        history_interval = round(history_step / timestep) if history_step > 0 else 0
+        if history_interval < 1 or abs(history_interval * timestep - history_step) > 1e-9:
+            raise ValueError(
+                f"history_step must be a positive multiple of the physics step {timestep} s, "
+                f"got {history_step}"
+            )
         self.scenario = scenario
         self.control = control or ControlConfig()
         self.road = build_road(scenario.road)
@@ -139,6 +152,13 @@ class World:
         n = self.n
         self._p_ref, self._v_ref, self._a_ref = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
         self._yaw_ref, self._rate_ref = np.zeros(n), np.zeros(n)
+        # Ring buffer of sampled motion (x, y, yaw, v along heading) for RoadUser.history.
+        self._history_interval = history_interval
+        self._history = np.zeros((history_length, n, 4))
+        self._history_times = np.zeros(history_length)
+        self._history_count = 0
+        self._steps = 0
+        self._sample_history()
 
     # ------------------------------------------------------------------ setup
 
@@ -218,6 +238,27 @@ class World:
             types=self.types,
         )
 
+    def _sample_history(self) -> None:
+        k = self._history_count % len(self._history_times)
+        qpos = self.scene.qpos
+        row = self._history[k]
+        row[:, 0:3] = qpos[:, 0:3]
+        row[:, 3] = self.speeds_along_heading()
+        self._history_times[k] = self.time
+        self._history_count += 1
+
+    def histories(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sampled true motion of every body, oldest first.
+
+        Returns:
+            (times [s] relative to now, shape (m,); samples (m, n, 4): x [m], y [m],
+            yaw [rad], speed along the heading [m/s]), m <= history_length.
+        """
+        size = len(self._history_times)
+        m = min(self._history_count, size)
+        order = (self._history_count - m + np.arange(m)) % size
+        return self._history_times[order] - self.time, self._history[order]
+
     def observe(
         self, rng: np.random.Generator | None = None, noise: ObservationNoise | None = None
     ) -> tuple[KinematicState, list[RoadUser]]:
@@ -229,6 +270,9 @@ class World:
 
         The ego's acceleration is the one its current plan commands; road users are
         reported with a = 0. Hidden road users (sensor range, occlusion) are left out.
+        Each road user carries its ``history``: the world's samples of its true motion
+        every ``history_step`` (a tracker's smoothed estimate; the observation noise
+        applies to the current state only).
 
         Returns:
             (ego state, road users with ids = entity indices, shapes, masses and legal
@@ -254,6 +298,7 @@ class World:
             float(x[0]), float(y[0]), float(yaw[0]), float(v[0]), a_plan, float(qvel[0, 2])
         )
         legal = self.fleet.legal_corridors(t)
+        h_times, h_rows = self.histories()
         users = [
             RoadUser(
                 id=i,
@@ -264,6 +309,7 @@ class World:
                 shape=Shape(float(self.lengths[i]), float(self.widths[i])),
                 mass=float(self.scene.masses[i]),
                 legal=legal[i - 1],
+                history=MotionHistory(h_times, h_rows[:, i, 0:2], h_rows[:, i, 2], h_rows[:, i, 3]),
             )
             for i in range(1, self.n)
             if visible[i]
@@ -354,6 +400,9 @@ class World:
         recorder.before_step()
         t_physics = clock()
         scene.step()
+        self._steps += 1
+        if self._steps % self._history_interval == 0:
+            self._sample_history()
         t_measure = clock()
         done = recorder.after_step() if (scene.data.ncon or recorder.busy) else []
         if scene.data.ncon:

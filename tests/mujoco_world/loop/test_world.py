@@ -206,3 +206,25 @@ def test_crashed_bodies_brake_to_rest_and_controls_are_cut():
     assert m.a.name == "ego" and m.b.name == "wall_car"
     assert m.a.dv_impulse == pytest.approx(0.5 * 15.0, rel=0.05)
     assert m.a.dv_com == pytest.approx(m.a.dv_impulse, abs=0.02)
+
+
+def test_observed_road_users_carry_their_sampled_history():
+    world = World(get_scenario("highway_cut_in"), history_step=0.1, history_length=11)
+    _, users = world.observe()
+    assert all(len(u.history) == 1 and u.history.times[-1] == 0.0 for u in users)
+    for _ in range(1550):  # 1.55 s of 1 ms steps
+        world.step()
+    _, users = world.observe()
+    user = users[0]
+    history = user.history
+    # 16 samples were taken (t = 0, 0.1, ..., 1.5); the newest 11 are kept, 0.05 s old.
+    assert len(history) == 11 and history.step == pytest.approx(0.1)
+    assert history.times == pytest.approx(np.arange(0.5, 1.51, 0.1) - 1.55)
+    # Speeds agree with the displacement between samples (an independent check).
+    moved = np.hypot(*np.diff(history.positions, axis=0).T) / 0.1
+    assert moved == pytest.approx(0.5 * (history.speeds[1:] + history.speeds[:-1]), rel=0.05, abs=0.05)
+    # The newest sample lies behind the current state by about 0.05 s of motion.
+    gap = math.hypot(user.state.x - history.positions[-1, 0], user.state.y - history.positions[-1, 1])
+    assert gap == pytest.approx(0.05 * user.state.v, rel=0.1, abs=0.02)
+    with pytest.raises(ValueError, match="history_step"):
+        World(get_scenario("highway_cut_in"), history_step=0.00015)
