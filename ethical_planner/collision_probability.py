@@ -50,6 +50,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import ndtr, owens_t
 
+from ethical_planner.validation import check_shape, shaped_array
+
 __all__ = ["CollisionProbability", "collision_probability", "polygon_gaussian_mass"]
 
 _T = TypeVar("_T")
@@ -165,17 +167,17 @@ def collision_probability(
             or a covariance is not symmetric positive definite.
 
     """
-    ex = _float_array(ego_x, "ego_x", 2, "(n_traj, n_t)")
+    ex = shaped_array("ego_x", ego_x, "(n_traj, n_t)", 2)
     n_traj, n_t = ex.shape
-    ey = _float_array(ego_y, "ego_y", 2, "(n_traj, n_t)", (n_traj, n_t))
-    eyaw = _float_array(ego_yaw, "ego_yaw", 2, "(n_traj, n_t)", (n_traj, n_t))
-    mean = _float_array(obs_mean, "obs_mean", 3, "(n_obs, n_t, 2)")
+    ey = shaped_array("ego_y", ego_y, "(n_traj, n_t)", 2, (n_traj, n_t))
+    eyaw = shaped_array("ego_yaw", ego_yaw, "(n_traj, n_t)", 2, (n_traj, n_t))
+    mean = shaped_array("obs_mean", obs_mean, "(n_obs, n_t, 2)", 3)
     n_obs = mean.shape[0]
-    _check_shape(mean, "obs_mean", "(n_obs, n_t, 2)", (n_obs, n_t, 2))
-    cov = _float_array(obs_cov, "obs_cov", 4, "(n_obs, n_t, 2, 2)", (n_obs, n_t, 2, 2))
-    oyaw = _float_array(obs_heading, "obs_heading", 2, "(n_obs, n_t)", (n_obs, n_t))
-    olen = _float_array(obs_length, "obs_length", 1, "(n_obs,)", (n_obs,))
-    owid = _float_array(obs_width, "obs_width", 1, "(n_obs,)", (n_obs,))
+    check_shape("obs_mean", mean, "(n_obs, n_t, 2)", (n_obs, n_t, 2))
+    cov = shaped_array("obs_cov", obs_cov, "(n_obs, n_t, 2, 2)", 4, (n_obs, n_t, 2, 2))
+    oyaw = shaped_array("obs_heading", obs_heading, "(n_obs, n_t)", 2, (n_obs, n_t))
+    olen = shaped_array("obs_length", obs_length, "(n_obs,)", 1, (n_obs,))
+    owid = shaped_array("obs_width", obs_width, "(n_obs,)", 1, (n_obs,))
     for name, size in (("ego_length", ego_length), ("ego_width", ego_width)):
         if not (math.isfinite(size) and size >= 0.0):
             raise ValueError(f"{name} must be a finite length >= 0 [m], got {size!r}")
@@ -301,12 +303,12 @@ def polygon_gaussian_mass(vertices: ArrayLike, mean: ArrayLike, cov: ArrayLike) 
             polygon, or a covariance that is not symmetric positive definite.
 
     """
-    verts = _float_array(vertices, "vertices", None, "(..., k, 2)")
+    verts = shaped_array("vertices", vertices, "(..., k, 2)")
     if verts.ndim < 2 or verts.shape[-1] != 2 or verts.shape[-2] < 3:
         raise ValueError(f"vertices must have shape (..., k, 2) with k >= 3, got {verts.shape}")
     batch = verts.shape[:-2]
-    mu = _float_array(mean, "mean", len(batch) + 1, "(..., 2)", (*batch, 2))
-    sig = _float_array(cov, "cov", len(batch) + 2, "(..., 2, 2)", (*batch, 2, 2))
+    mu = shaped_array("mean", mean, "(..., 2)", len(batch) + 1, (*batch, 2))
+    sig = shaped_array("cov", cov, "(..., 2, 2)", len(batch) + 2, (*batch, 2, 2))
     k = verts.shape[-2]
     verts = verts.reshape(-1, k, 2)
     mu = mu.reshape(-1, 2)
@@ -917,27 +919,3 @@ def _upper_tail(x: np.ndarray) -> np.ndarray:
     np.take(_Q_TABLE, index, out=out)
     out += node
     return out
-
-
-def _float_array(
-    value: ArrayLike,
-    name: str,
-    ndim: int | None,
-    expected: str,
-    shape: tuple[int, ...] | None = None,
-) -> np.ndarray:
-    """Return ``value`` as a finite float64 array, checking its rank and shape."""
-    array = np.asarray(value, dtype=np.float64)
-    if ndim is not None and array.ndim != ndim:
-        raise ValueError(f"{name} must have shape {expected}, got {array.shape}")
-    if shape is not None:
-        _check_shape(array, name, expected, shape)
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite")
-    return array
-
-
-def _check_shape(array: np.ndarray, name: str, expected: str, shape: tuple[int, ...]) -> None:
-    """Raise a ValueError naming ``name`` unless ``array`` has ``shape``."""
-    if array.shape != shape:
-        raise ValueError(f"{name} must have shape {expected} = {shape}, got {array.shape}")

@@ -9,24 +9,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ethical_planner.harm import HarmModel
-
-
-def _check(condition: bool, message: str) -> None:
-    if not condition:
-        raise ValueError(message)
-
-
-def _finite(owner: str, obj: object) -> None:
-    for f in dataclasses.fields(obj):  # type: ignore[arg-type]
-        value = getattr(obj, f.name)
-        if isinstance(value, float | int) and not isinstance(value, bool):
-            _check(math.isfinite(value), f"{owner}.{f.name} must be finite, got {value!r}")
+from ethical_planner.records import errors_in, from_mapping, read_toml
+from ethical_planner.registry import Registry
+from ethical_planner.validation import check, check_numeric_fields_finite, parse_enum
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,19 +45,19 @@ class SamplingConfig:
     max_end_deceleration: float = 8.0
 
     def __post_init__(self) -> None:
-        _finite("sampling", self)
-        _check(self.n_speeds >= 1, "sampling.n_speeds must be >= 1")
-        _check(self.n_offsets >= 1, "sampling.n_offsets must be >= 1")
-        _check(self.d_min <= self.d_max, "sampling.d_min must be <= sampling.d_max")
+        check_numeric_fields_finite("sampling", self)
+        check(self.n_speeds >= 1, "sampling.n_speeds must be >= 1")
+        check(self.n_offsets >= 1, "sampling.n_offsets must be >= 1")
+        check(self.d_min <= self.d_max, "sampling.d_min must be <= sampling.d_max")
         object.__setattr__(self, "horizons", tuple(float(h) for h in self.horizons))
-        _check(len(self.horizons) >= 1, "sampling.horizons must name at least one horizon")
-        _check(self.dt > 0, f"sampling.dt must be > 0 s, got {self.dt}")
+        check(len(self.horizons) >= 1, "sampling.horizons must name at least one horizon")
+        check(self.dt > 0, f"sampling.dt must be > 0 s, got {self.dt}")
         for horizon in self.horizons:
-            _check(
+            check(
                 math.isfinite(horizon) and horizon >= self.dt,
                 f"sampling.horizons must be finite and >= dt ({self.dt} s), got {horizon}",
             )
-        _check(
+        check(
             self.max_end_acceleration > 0 and self.max_end_deceleration > 0,
             "sampling.max_end_acceleration and max_end_deceleration must be > 0 m/s^2",
         )
@@ -96,11 +87,11 @@ class VehicleLimits:
     emergency_deceleration: float = 8.0
 
     def __post_init__(self) -> None:
-        _finite("vehicle", self)
-        _check(self.v_max > 0, "vehicle.v_max must be > 0 m/s")
-        _check(self.a_max > 0 > self.a_min, "vehicle.a_max must be > 0 and vehicle.a_min < 0")
-        _check(self.kappa_max > 0, "vehicle.kappa_max must be > 0 1/m")
-        _check(self.emergency_deceleration > 0, "vehicle.emergency_deceleration must be > 0")
+        check_numeric_fields_finite("vehicle", self)
+        check(self.v_max > 0, "vehicle.v_max must be > 0 m/s")
+        check(self.a_max > 0 > self.a_min, "vehicle.a_max must be > 0 and vehicle.a_min < 0")
+        check(self.kappa_max > 0, "vehicle.kappa_max must be > 0 1/m")
+        check(self.emergency_deceleration > 0, "vehicle.emergency_deceleration must be > 0")
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,13 +117,13 @@ class PredictionConfig:
     use_turn_rate: bool = True
 
     def __post_init__(self) -> None:
-        _finite("prediction", self)
-        _check(isinstance(self.model, str) and bool(self.model), "prediction.model must name a predictor")
+        check_numeric_fields_finite("prediction", self)
+        check(isinstance(self.model, str) and bool(self.model), "prediction.model must name a predictor")
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if not isinstance(value, bool | str):
-                _check(value >= 0, f"prediction.{f.name} must be >= 0, got {value}")
-        _check(self.covariance_floor > 0, "prediction.covariance_floor must be > 0 m^2")
+                check(value >= 0, f"prediction.{f.name} must be >= 0, got {value}")
+        check(self.covariance_floor > 0, "prediction.covariance_floor must be > 0 m^2")
 
 
 @dataclass(frozen=True, slots=True)
@@ -158,17 +149,16 @@ class RiskConfig:
 
     def __post_init__(self) -> None:
         for name in ("harm_model", "pedestrian_model"):
-            try:
-                object.__setattr__(self, name, HarmModel.parse(getattr(self, name)))
-            except ValueError as error:
-                raise ValueError(f"risk.{name}: {error}") from None
-        _finite("risk", self)
-        _check(
+            object.__setattr__(
+                self, name, parse_enum(HarmModel, getattr(self, name), "harm model", f"risk.{name}")
+            )
+        check_numeric_fields_finite("risk", self)
+        check(
             self.delta_v_correction is None or isinstance(self.delta_v_correction, str),
             "risk.delta_v_correction must be the path of a calibration JSON file or unset",
         )
-        _check(self.gate_sigmas > 0, "risk.gate_sigmas must be > 0")
-        _check(
+        check(self.gate_sigmas > 0, "risk.gate_sigmas must be > 0")
+        check(
             0.0 <= self.max_acceptable_risk <= 1.0,
             f"risk.max_acceptable_risk must lie in [0, 1], got {self.max_acceptable_risk}",
         )
@@ -192,14 +182,14 @@ class ResponsibilityConfig:
     rear_end: float = 0.3
 
     def __post_init__(self) -> None:
-        _finite("responsibility", self)
-        _check(
+        check_numeric_fields_finite("responsibility", self)
+        check(
             min(self.base_max, self.rule_violation, self.rear_end) >= 0,
             "responsibility.base_max, rule_violation and rear_end must be >= 0",
         )
-        _check(self.base_mass_scale > 0, "responsibility.base_mass_scale must be > 0 kg")
+        check(self.base_mass_scale > 0, "responsibility.base_mass_scale must be > 0 kg")
         total = self.base_max + self.rule_violation + self.rear_end
-        _check(
+        check(
             total < 1.0,
             "responsibility.base_max + rule_violation + rear_end must be < 1 so that no "
             f"road user's risk is ignored entirely (r_i = 1), got {total:g}",
@@ -236,11 +226,11 @@ class CostWeights:
     path_distance: float = 10.0
 
     def __post_init__(self) -> None:
-        _finite("weights", self)
+        check_numeric_fields_finite("weights", self)
         for f in dataclasses.fields(self):
-            _check(getattr(self, f.name) >= 0, f"weights.{f.name} must be >= 0")
-        _check(self.maximin_gamma >= 1, "weights.maximin_gamma must be >= 1 (Eq. 10)")
-        _check(self.responsibility <= 1, "weights.responsibility must lie in [0, 1]")
+            check(getattr(self, f.name) >= 0, f"weights.{f.name} must be >= 0")
+        check(self.maximin_gamma >= 1, "weights.maximin_gamma must be >= 1 (Eq. 10)")
+        check(self.responsibility <= 1, "weights.responsibility must lie in [0, 1]")
 
 
 @dataclass(frozen=True, slots=True)
@@ -263,67 +253,50 @@ class PlannerConfig:
 
     def __post_init__(self) -> None:
         if self.desired_speed is not None:
-            _check(
+            check(
                 math.isfinite(self.desired_speed) and self.desired_speed >= 0,
                 f"desired_speed must be a finite speed >= 0 m/s, got {self.desired_speed}",
             )
 
-    def with_overrides(self, overrides: dict[str, Any]) -> PlannerConfig:
-        """Return a copy with nested ``overrides`` applied (unknown keys rejected)."""
-        return _apply(self, overrides, prefix="")
+    def with_overrides(self, overrides: Mapping[str, Any]) -> PlannerConfig:
+        """Return a copy with nested ``overrides`` applied.
 
-
-def _apply(obj: Any, overrides: dict[str, Any], prefix: str) -> Any:
-    if not isinstance(overrides, dict):
-        raise ValueError(f"{prefix.rstrip('.') or 'config'} must be a table of keys")
-    known = {f.name: f for f in dataclasses.fields(obj)}
-    changes: dict[str, Any] = {}
-    for key, value in overrides.items():
-        if key not in known:
-            allowed = ", ".join(sorted(known))
-            raise ValueError(f"unknown configuration key '{prefix}{key}'; allowed here: {allowed}")
-        current = getattr(obj, key)
-        if dataclasses.is_dataclass(current):
-            changes[key] = _apply(current, value, prefix=f"{prefix}{key}.")
-        elif isinstance(current, tuple):
-            changes[key] = tuple(value) if isinstance(value, list | tuple) else (value,)
-        else:
-            changes[key] = value
-    try:
-        return dataclasses.replace(obj, **changes)
-    except TypeError as error:
-        raise ValueError(f"bad value in {prefix.rstrip('.') or 'config'}: {error}") from None
+        Raises:
+            ValueError: an unknown key (named with its dotted path) or an invalid value.
+        """
+        return from_mapping(PlannerConfig, overrides, base=self)
 
 
 #: The presets as small overrides of the default (SPEC section 5).
-PRESET_OVERRIDES: dict[str, dict[str, Any]] = {
-    "ethical": {},
-    "selfish": {
-        "name": "selfish",
-        "weights": {"bayes": 0.0, "equality": 0.0, "maximin": 0.0, "ego_risk": 100.0},
-    },
-    "standard": {
-        "name": "standard",
-        "weights": {"risk": 0.0, "bayes": 0.0, "equality": 0.0, "maximin": 0.0},
-    },
-    "ethical_responsible": {"name": "ethical_responsible", "weights": {"responsibility": 0.5}},
-}
+PRESETS: Registry[Mapping[str, Any]] = Registry("planner preset")
+PRESETS.register("ethical", {})
+PRESETS.register(
+    "selfish",
+    {"name": "selfish", "weights": {"bayes": 0.0, "equality": 0.0, "maximin": 0.0, "ego_risk": 100.0}},
+)
+PRESETS.register(
+    "standard",
+    {"name": "standard", "weights": {"risk": 0.0, "bayes": 0.0, "equality": 0.0, "maximin": 0.0}},
+)
+PRESETS.register("ethical_responsible", {"name": "ethical_responsible", "weights": {"responsibility": 0.5}})
 
 
 def preset(name: str) -> PlannerConfig:
-    """Return the configuration of a named preset.
+    """Return the configuration of a named preset (``PRESETS``).
 
     Raises:
         ValueError: for an unknown name (the message lists the presets).
     """
-    if name not in PRESET_OVERRIDES:
-        raise ValueError(f"unknown planner preset {name!r}; allowed: {', '.join(PRESET_OVERRIDES)}")
-    return PlannerConfig().with_overrides(PRESET_OVERRIDES[name])
+    return PlannerConfig().with_overrides(PRESETS.get(name))
 
 
 def load_config(path: str | Path, base: str = "ethical") -> PlannerConfig:
-    """Load a TOML file of overrides on top of the preset ``base`` (key ``preset`` wins)."""
-    with open(path, "rb") as handle:
-        data = tomllib.load(handle)
-    base = data.pop("preset", base)
-    return preset(base).with_overrides(data)
+    """Load a TOML file of overrides on top of the preset ``base`` (key ``preset`` wins).
+
+    Raises:
+        ValueError: unreadable file, unknown preset or key, invalid value; the message
+            names the file and the dotted key.
+    """
+    data = read_toml(path, "planner configuration")
+    with errors_in(path):
+        return preset(data.pop("preset", base)).with_overrides(data)

@@ -7,8 +7,9 @@ ones, where the bodies slide off each other and the delta-v is smaller. A
 over two quantities the planner can compute from the pre-impact states:
 
 - the angle between the two velocity directions (0 = rear-end, 90 deg = T-bone,
-  180 deg = head-on), ``velocity_angle``;
-- the impact offset fraction (0 = central, 1 = grazing), ``impact_offset_fraction``.
+  180 deg = head-on), ``ethical_planner.geometry.velocity_angle``;
+- the impact offset fraction (0 = central, 1 = grazing),
+  ``ethical_planner.geometry.impact_offset_fraction``.
 
 Both bodies of an impact share one factor, since both delta-v come from one impulse.
 The table is fitted by ``harm_calibration.calibration``; this module only applies it,
@@ -33,6 +34,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ethical_planner.geometry import wrap_angle
+
 #: Default bin edges of the angle between the velocity directions [deg] (15-deg bins
 #: centred on multiples of 15 deg, half bins at 0 and 180 deg).
 DEFAULT_ANGLE_EDGES_DEG = (
@@ -40,121 +43,9 @@ DEFAULT_ANGLE_EDGES_DEG = (
 )  # fmt: skip
 #: Default bin edges of the impact offset fraction [-] (bins centred on 0, 0.25, 0.5, 0.75, 1).
 DEFAULT_OFFSET_EDGES = (0.0, 0.125, 0.375, 0.625, 0.875, 1.0)
-#: Relative speed below which the approach direction is undefined [m/s].
-MIN_RELATIVE_SPEED = 1e-9
-#: Speed below which a body's heading replaces its velocity direction [m/s].
-MIN_SPEED = 1e-6
 
 _KEYS = ("angle_edges_deg", "offset_edges", "factors", "n_train")
 _REQUIRED = ("angle_edges_deg", "offset_edges", "factors")
-
-
-def _vectors(name: str, value: ArrayLike) -> np.ndarray:
-    array = np.asarray(value, dtype=float)
-    if array.ndim == 0 or array.shape[-1] != 2:
-        raise ValueError(f"{name} must have shape (..., 2), got shape {array.shape}")
-    return array
-
-
-def _lengths(name: str, value: ArrayLike) -> np.ndarray:
-    array = np.asarray(value, dtype=float)
-    if not np.all(np.isfinite(array) & (array > 0.0)):
-        raise ValueError(f"{name} must be finite and > 0 [m], got {value!r}")
-    return array
-
-
-def _half_extent(yaw: np.ndarray, length: np.ndarray, width: np.ndarray, nx: np.ndarray, ny: np.ndarray):
-    """Half-extent [m] of a rectangle with heading ``yaw`` along the unit direction (nx, ny)."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    return 0.5 * length * np.abs(c * nx + s * ny) + 0.5 * width * np.abs(c * ny - s * nx)
-
-
-def impact_offset_fraction(
-    ego_pos: ArrayLike,
-    ego_vel: ArrayLike,
-    ego_yaw: ArrayLike,
-    ego_length: ArrayLike,
-    ego_width: ArrayLike,
-    obs_pos: ArrayLike,
-    obs_vel: ArrayLike,
-    obs_yaw: ArrayLike,
-    obs_length: ArrayLike,
-    obs_width: ArrayLike,
-) -> np.ndarray:
-    """Lateral offset of an impact as a fraction of the largest offset that still touches.
-
-    The other body's centre approaches the ego's centre along the relative velocity
-    w = obs_vel - ego_vel. The offset is the perpendicular distance of the other
-    centre from the line through the ego's centre along w; it is divided by the
-    largest such distance at which the two rectangular footprints can touch, the sum
-    of their half-extents perpendicular to w. The result is clipped to [0, 1]:
-    0 = central impact, 1 = grazing (or missing). Under constant velocities the
-    distance does not change along the approach, so states at any step before or at
-    contact give the same value. ``harm_calibration.geometry.offset_fraction`` is the
-    same quantity (its Minkowski-sum edge offset equals the sum of half-extents).
-
-    Args:
-        ego_pos: ego centre [m], shape (..., 2).
-        ego_vel: ego velocity [m/s], shape (..., 2).
-        ego_yaw: ego heading [rad], shape (...).
-        ego_length: ego length [m], > 0, shape (...).
-        ego_width: ego width [m], > 0, shape (...).
-        obs_pos: other road user's centre [m], shape (..., 2).
-        obs_vel: its velocity [m/s], shape (..., 2).
-        obs_yaw: its heading [rad], shape (...).
-        obs_length: its length [m], > 0, shape (...).
-        obs_width: its width [m], > 0, shape (...).
-
-    Returns:
-        Offset fraction in [0, 1], the broadcast shape of the arguments (vectors
-        without their last axis); 0 where the relative speed is below
-        ``MIN_RELATIVE_SPEED`` (no approach, Eq. 1 gives dv = 0 there anyway).
-
-    Raises:
-        ValueError: vectors without a last axis of 2, or lengths not finite and > 0.
-    """
-    ep, ev = _vectors("ego_pos", ego_pos), _vectors("ego_vel", ego_vel)
-    op, ov = _vectors("obs_pos", obs_pos), _vectors("obs_vel", obs_vel)
-    el, ew = _lengths("ego_length", ego_length), _lengths("ego_width", ego_width)
-    ol, ow = _lengths("obs_length", obs_length), _lengths("obs_width", obs_width)
-    wx, wy = ov[..., 0] - ev[..., 0], ov[..., 1] - ev[..., 1]
-    speed = np.hypot(wx, wy)
-    moving = speed > MIN_RELATIVE_SPEED
-    safe = np.where(moving, speed, 1.0)
-    # unit normal of the approach line (any unit vector where there is no approach)
-    nx, ny = np.where(moving, -wy / safe, 1.0), np.where(moving, wx / safe, 0.0)
-    dist = np.abs((op[..., 0] - ep[..., 0]) * nx + (op[..., 1] - ep[..., 1]) * ny)
-    reach = _half_extent(np.asarray(ego_yaw, dtype=float), el, ew, nx, ny) + _half_extent(
-        np.asarray(obs_yaw, dtype=float), ol, ow, nx, ny
-    )
-    return np.where(moving, np.clip(dist / reach, 0.0, 1.0), 0.0)
-
-
-def velocity_angle(
-    ego_vel: ArrayLike, obs_vel: ArrayLike, ego_yaw: ArrayLike, obs_yaw: ArrayLike
-) -> np.ndarray:
-    """Angle between the two velocity directions (the alpha of Eq. 1) [rad], in [0, pi].
-
-    A body slower than ``MIN_SPEED`` has no velocity direction; its heading is used
-    instead (as ``harm_calibration.rows`` does for a body at rest).
-
-    Args:
-        ego_vel: ego velocity [m/s], shape (..., 2).
-        obs_vel: other road user's velocity [m/s], shape (..., 2).
-        ego_yaw: ego heading [rad], shape (...).
-        obs_yaw: other heading [rad], shape (...).
-
-    Returns:
-        Angle [rad] in [0, pi], the broadcast shape (vectors without their last axis).
-    """
-    ev, ov = _vectors("ego_vel", ego_vel), _vectors("obs_vel", obs_vel)
-    directions = []
-    for v, yaw in ((ev, ego_yaw), (ov, obs_yaw)):
-        yaw = np.asarray(yaw, dtype=float)
-        still = np.hypot(v[..., 0], v[..., 1]) < MIN_SPEED
-        directions.append((np.where(still, np.cos(yaw), v[..., 0]), np.where(still, np.sin(yaw), v[..., 1])))
-    (ax, ay), (bx, by) = directions
-    return np.abs(np.arctan2(ax * by - ay * bx, ax * bx + ay * by))
 
 
 def _edges(name: str, edges: Sequence[float], low: float, high: float) -> tuple[float, ...]:
@@ -238,7 +129,7 @@ class DeltaVCorrection:
         """
         a = np.asarray(angle, dtype=float)
         o = np.asarray(offset_fraction, dtype=float)
-        folded = np.degrees(np.abs(np.remainder(a + np.pi, 2 * np.pi) - np.pi))
+        folded = np.degrees(np.abs(wrap_angle(a)))
         n_angle, n_offset = self._table.shape
         ia = np.clip(np.searchsorted(self.angle_edges_deg, folded, side="right") - 1, 0, n_angle - 1)
         io = np.clip(
@@ -316,6 +207,4 @@ __all__ = [
     "DEFAULT_ANGLE_EDGES_DEG",
     "DEFAULT_OFFSET_EDGES",
     "DeltaVCorrection",
-    "impact_offset_fraction",
-    "velocity_angle",
 ]

@@ -22,16 +22,22 @@ from dataclasses import dataclass, field
 from enum import IntEnum, StrEnum
 from importlib import resources
 from types import MappingProxyType
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import expit
 
-from ethical_planner.dv_correction import DeltaVCorrection, impact_offset_fraction, velocity_angle
-from ethical_planner.enums import parse_enum
-
-_TWO_PI = 2.0 * math.pi
+from ethical_planner.dv_correction import DeltaVCorrection
+from ethical_planner.geometry import impact_offset_fraction, velocity_angle, wrap_angle, wrap_angle_in_place
+from ethical_planner.records import from_mapping
+from ethical_planner.validation import (
+    check_finite,
+    finite_array,
+    non_negative_array,
+    parse_enum,
+    positive_array,
+    vector_array,
+)
 
 
 class HarmModel(StrEnum):
@@ -102,67 +108,7 @@ _REDUCED_BY_CODE = np.array(
 _CLOCK_BY_CODE = np.array([12, 12, 1, 11, 2, 10, 3, 9, 4, 8, 5, 7, 6, 6], dtype=np.intp)
 
 
-# --------------------------------------------------------------------------- validation
-
-
-def _finite(name: str, value: ArrayLike, allowed: str = "finite numbers") -> np.ndarray:
-    """``value`` as a float array, or a ValueError naming ``name`` and the first bad entry."""
-    try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be {allowed}, got {value!r}") from None
-    ok = np.isfinite(array)
-    if not ok.all():
-        _raise_bad(name, array, ok, allowed)
-    return array
-
-
-def _raise_bad(name: str, array: np.ndarray, ok: np.ndarray, allowed: str) -> None:
-    if array.ndim == 0:
-        raise ValueError(f"{name} must be {allowed}, got {array.item()!r}")
-    index = tuple(int(i) for i in np.argwhere(~ok)[0])
-    raise ValueError(f"{name} must be {allowed}, got {array[index]!r} at index {index}")
-
-
-def _non_negative(name: str, value: ArrayLike, unit: str) -> np.ndarray:
-    allowed = f"finite and >= 0 {unit}"
-    array = _finite(name, value, allowed)
-    ok = array >= 0.0
-    if not ok.all():
-        _raise_bad(name, array, ok, allowed)
-    return array
-
-
-def _positive(name: str, value: ArrayLike, unit: str) -> np.ndarray:
-    allowed = f"finite and > 0 {unit}"
-    array = _finite(name, value, allowed)
-    ok = array > 0.0
-    if not ok.all():
-        _raise_bad(name, array, ok, allowed)
-    return array
-
-
-def _vectors(name: str, value: ArrayLike, unit: str) -> np.ndarray:
-    array = _finite(name, value, f"finite {unit}")
-    if array.ndim == 0 or array.shape[-1] != 2:
-        raise ValueError(f"{name} must have shape (..., 2) {unit}, got shape {array.shape}")
-    return array
-
-
 # --------------------------------------------------------------------------- geometry
-
-
-def wrap_angle(angle: ArrayLike) -> np.ndarray:
-    """Wrap angles into (-pi, pi].
-
-    Args:
-        angle: angles [rad], any shape.
-
-    Returns:
-        Wrapped angles [rad], same shape.
-
-    """
-    return _wrap_in_place(np.array(angle, dtype=float))
 
 
 def _own(value: ArrayLike, *others: ArrayLike) -> np.ndarray | None:
@@ -177,22 +123,6 @@ def _own(value: ArrayLike, *others: ArrayLike) -> np.ndarray | None:
     ):
         return value
     return None
-
-
-def _wrap_in_place(angle: np.ndarray) -> np.ndarray:
-    """Wrap a float array this module owns into (-pi, pi], in place where possible."""
-    angle = np.asarray(angle)
-    turns = np.multiply(angle, 1.0 / _TWO_PI, out=np.empty_like(angle))
-    np.rint(turns, out=turns)
-    turns *= _TWO_PI
-    angle -= turns  # now in [-pi, pi] up to rounding; unchanged if already inside
-    low = angle <= -np.pi
-    if low.any():
-        angle[low] += _TWO_PI
-    high = angle > np.pi
-    if high.any():
-        angle[high] -= _TWO_PI
-    return angle
 
 
 def _area_code(wrapped: np.ndarray, width: float) -> np.ndarray:
@@ -218,7 +148,7 @@ def reduced_area(angle: ArrayLike) -> np.ndarray:
         ``ReducedArea`` values as an integer array, same shape.
 
     """
-    wrapped = wrap_angle(_finite("angle", angle, "finite angles [rad]"))
+    wrapped = wrap_angle(finite_array("angle", angle, "finite angles [rad]"))
     return _REDUCED_BY_CODE[_area_code(wrapped, _REDUCED_WIDTH)]
 
 
@@ -235,7 +165,7 @@ def clock_area(angle: ArrayLike) -> np.ndarray:
         Integer array of clock positions, same shape.
 
     """
-    wrapped = wrap_angle(_finite("angle", angle, "finite angles [rad]"))
+    wrapped = wrap_angle(finite_array("angle", angle, "finite angles [rad]"))
     return _CLOCK_BY_CODE[_area_code(wrapped, _CLOCK_WIDTH)]
 
 
@@ -267,14 +197,14 @@ def impact_angles(
     """
     names = ("x_ego", "y_ego", "yaw_ego", "x_obs", "y_obs", "yaw_obs")
     values = (x_ego, y_ego, yaw_ego, x_obs, y_obs, yaw_obs)
-    xe, ye, he, xo, yo, ho = (_finite(n, v) for n, v in zip(names, values, strict=True))
+    xe, ye, he, xo, yo, ho = (finite_array(n, v) for n, v in zip(names, values, strict=True))
     dy = yo - ye
     dx = xo - xe
     rel = np.arctan2(dy, dx, out=_own(dy, dx))
     obs_angle = np.subtract(rel, ho, out=_own(dx, rel, ho))
     obs_angle += np.pi
     ego_angle = np.subtract(rel, he, out=_own(rel, he))
-    return _wrap_in_place(ego_angle), _wrap_in_place(obs_angle)
+    return wrap_angle_in_place(ego_angle), wrap_angle_in_place(obs_angle)
 
 
 def delta_v(
@@ -295,10 +225,10 @@ def delta_v(
         (dv_a, dv_b) [m/s], of the broadcast shape without the last axis.
 
     """
-    m_a = _positive("mass_a", mass_a, "[kg]")
-    m_b = _positive("mass_b", mass_b, "[kg]")
-    va = _vectors("vel_a", vel_a, "[m/s]")
-    vb = _vectors("vel_b", vel_b, "[m/s]")
+    m_a = positive_array("mass_a", mass_a, "[kg]")
+    m_b = positive_array("mass_b", mass_b, "[kg]")
+    va = vector_array("vel_a", vel_a, "[m/s]")
+    vb = vector_array("vel_b", vel_b, "[m/s]")
     closing = np.subtract(va[..., 0], vb[..., 0])
     closing = np.multiply(closing, closing, out=_own(closing))
     dy = np.subtract(va[..., 1], vb[..., 1])
@@ -333,11 +263,11 @@ def delta_v_polar(
         (dv_a, dv_b) [m/s], of the broadcast shape of the arguments.
 
     """
-    m_a = _positive("mass_a", mass_a, "[kg]")
-    m_b = _positive("mass_b", mass_b, "[kg]")
-    v_a = _finite("speed_a", speed_a, "finite speeds [m/s]")
-    v_b = _finite("speed_b", speed_b, "finite speeds [m/s]")
-    alpha = _finite("yaw_b", yaw_b) - _finite("yaw_a", yaw_a)
+    m_a = positive_array("mass_a", mass_a, "[kg]")
+    m_b = positive_array("mass_b", mass_b, "[kg]")
+    v_a = finite_array("speed_a", speed_a, "finite speeds [m/s]")
+    v_b = finite_array("speed_b", speed_b, "finite speeds [m/s]")
+    alpha = finite_array("yaw_b", yaw_b) - finite_array("yaw_a", yaw_a)
     squared = v_a * v_a + v_b * v_b - 2.0 * v_a * v_b * np.cos(alpha)
     closing = np.sqrt(np.maximum(squared, 0.0))
     total = m_a + m_b
@@ -379,11 +309,6 @@ def _area_keys(scheme: AreaScheme) -> tuple[str, ...]:
     return ("all",) if bins is None else bins.keys
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
-_ROW_KEYS = frozenset({"label", "injury", "form", "areas", "c0", "c1", "area"})
 _INJURY_LEVELS = ("MAIS2+", "MAIS3+")
 
 
@@ -411,62 +336,67 @@ class HarmCoefficients:
     areas: AreaScheme
     c0: float
     c1: float
-    area: Mapping[str, float] = field(hash=False)
+    area: Mapping[str, float] | None = field(default=None, hash=False)
     lookup: np.ndarray = field(init=False, repr=False, compare=False, hash=False)
 
     def __post_init__(self) -> None:
-        where = f"harm model {self.model.value!r}"
-        for name in ("c0", "c1"):
-            value = getattr(self, name)
-            if not _is_number(value):
-                raise ValueError(f"{where}: {name} must be a finite number, got {value!r}")
-            object.__setattr__(self, name, float(value))
+        model = parse_enum(HarmModel, self.model, "harm model")
+        where = model.value
+        object.__setattr__(self, "model", model)
+        object.__setattr__(
+            self, "form", parse_enum(FunctionalForm, self.form, "functional form", f"{where}.form")
+        )
+        object.__setattr__(self, "areas", parse_enum(AreaScheme, self.areas, "area scheme", f"{where}.areas"))
+        check_finite(where, c0=self.c0, c1=self.c1)
+        object.__setattr__(self, "c0", float(self.c0))
+        object.__setattr__(self, "c1", float(self.c1))
         if self.injury not in _INJURY_LEVELS:
-            raise ValueError(f"{where}: injury must be one of {_INJURY_LEVELS}, got {self.injury!r}")
+            raise ValueError(
+                f"{where}.injury: unknown injury level {self.injury!r}; allowed: {', '.join(_INJURY_LEVELS)}"
+            )
+        area = self.area
+        if area is None:
+            if self.form is FunctionalForm.REFERENCE_SPEED or self.areas is not AreaScheme.NONE:
+                raise ValueError(f"{where}.area is missing (scheme {self.areas.value!r} has areas)")
+            area = {"all": 0.0}
+        if not isinstance(area, Mapping):
+            raise ValueError(f"{where}.area must be a table, got {area!r}")
         keys = _area_keys(self.areas)
         expected = set(keys)
-        if set(self.area) != expected:
+        if set(area) != expected:
             raise ValueError(
-                f"{where}: area keys for scheme {self.areas.value!r} must be "
-                f"{sorted(expected)}, got {sorted(self.area)}"
+                f"{where}.area keys for scheme {self.areas.value!r} must be "
+                f"{sorted(expected)}, got {sorted(area)}"
             )
-        for key, value in self.area.items():
-            if not _is_number(value):
-                raise ValueError(f"{where}: area.{key} must be a finite number, got {value!r}")
+        check_finite(f"{where}.area", **area)
         if self.form is FunctionalForm.UNPROTECTED_LOGISTIC and self.areas is not AreaScheme.NONE:
             raise ValueError(f"{where}: the unprotected_logistic form takes areas = 'none'")
         if self.form is FunctionalForm.REFERENCE_SPEED:
-            if self.c0 != 0.0 or self.c1 <= 0.0 or min(self.area.values()) <= 0.0:
+            if self.c0 != 0.0 or self.c1 <= 0.0 or min(area.values()) <= 0.0:
                 raise ValueError(
                     f"{where}: reference_speed needs c0 = 0, exponent c1 > 0 and "
                     "reference speeds (area) > 0 m/s"
                 )
-        lookup = np.array([float(self.area[key]) for key in keys])
+        lookup = np.array([float(area[key]) for key in keys])
         lookup.flags.writeable = False
-        object.__setattr__(self, "area", MappingProxyType(dict(self.area)))
+        object.__setattr__(self, "area", MappingProxyType(dict(area)))
         object.__setattr__(self, "lookup", lookup)
-
-
-def _parse_enum(enum: type[StrEnum], where: str, key: str, value: Any) -> Any:
-    try:
-        return enum(value)
-    except ValueError:
-        allowed = ", ".join(e.value for e in enum)
-        raise ValueError(f"{where}: {key} must be one of {allowed}; got {value!r}") from None
 
 
 def parse_harm_parameters(text: str) -> Mapping[HarmModel, HarmCoefficients]:
     """Parse a harm parameter table in the format of ``data/harm_parameters.toml``.
 
     Args:
-        text: TOML text with one ``[models.<name>]`` table per ``HarmModel``.
+        text: TOML text with one ``[models.<name>]`` table per ``HarmModel``; each
+            table holds the fields of ``HarmCoefficients`` except ``model``.
 
     Returns:
         Read-only mapping from every ``HarmModel`` to its coefficients.
 
     Raises:
         ValueError: a model is missing or unknown, a key is unknown or missing, or a
-            value is out of range; the message names it.
+            value is out of range; the message names it by its dotted key
+            (``models.reduced_sym.area``).
 
     """
     try:
@@ -481,35 +411,11 @@ def parse_harm_parameters(text: str) -> Mapping[HarmModel, HarmCoefficients]:
         raise ValueError(f"harm parameters: missing models {missing}")
     table: dict[HarmModel, HarmCoefficients] = {}
     for name, row in rows.items():
-        model = HarmModel.parse(name)
-        where = f"harm model {name!r}"
-        if not isinstance(row, dict):
-            raise ValueError(f"{where}: must be a table, got {row!r}")
-        unknown = sorted(set(row) - _ROW_KEYS)
-        if unknown:
-            raise ValueError(f"{where}: unknown keys {unknown}; allowed: {sorted(_ROW_KEYS)}")
-        absent = sorted(_ROW_KEYS - set(row) - {"area"})
-        if absent:
-            raise ValueError(f"{where}: missing keys {absent}")
-        form = _parse_enum(FunctionalForm, where, "form", row["form"])
-        areas = _parse_enum(AreaScheme, where, "areas", row["areas"])
-        area = row.get("area")
-        if area is not None and not isinstance(area, dict):
-            raise ValueError(f"{where}: area must be a table, got {area!r}")
-        if area is None:
-            if form is FunctionalForm.REFERENCE_SPEED or areas is not AreaScheme.NONE:
-                raise ValueError(f"{where}: missing key 'area'")
-            area = {"all": 0.0}
-        table[model] = HarmCoefficients(
-            model=model,
-            label=str(row["label"]),
-            injury=str(row["injury"]),
-            form=form,
-            areas=areas,
-            c0=row["c0"],
-            c1=row["c1"],
-            area=area,
-        )
+        model = parse_enum(HarmModel, name, "harm model", "models")
+        if isinstance(row, Mapping) and "model" in row:
+            raise ValueError(f"unknown key 'models.{name}.model': a model is named by its table")
+        data = {**row, "model": model} if isinstance(row, Mapping) else row
+        table[model] = from_mapping(HarmCoefficients, data, f"models.{name}")
     return MappingProxyType(table)
 
 
@@ -585,14 +491,14 @@ def harm(model: HarmModel | str, dv: ArrayLike, angle: ArrayLike | None = None) 
 
     """
     c = coefficients(model)
-    dv_array = _non_negative("dv", dv, "[m/s]")
+    dv_array = non_negative_array("dv", dv, "[m/s]")
     if c.areas is AreaScheme.NONE:
         return _harm_unchecked(c, dv_array, dv_array)
     if angle is None:
         raise ValueError(
             f"harm model {c.model.value!r} distinguishes impact areas ({c.areas.value}); pass angle [rad]"
         )
-    wrapped = wrap_angle(_finite("angle", angle, "finite angles [rad]"))
+    wrapped = wrap_angle(finite_array("angle", angle, "finite angles [rad]"))
     return _harm_unchecked(c, dv_array, wrapped)
 
 
@@ -606,7 +512,7 @@ def boundary_harm(ego_speed: ArrayLike) -> np.ndarray:
         MAIS3+ probability, same shape.
 
     """
-    speed = np.abs(_finite("ego_speed", ego_speed, "finite speeds [m/s]"))
+    speed = np.abs(finite_array("ego_speed", ego_speed, "finite speeds [m/s]"))
     return _harm_unchecked(coefficients(HarmModel.IGNORE_ANGLE), speed, speed)
 
 
@@ -717,16 +623,16 @@ def collision_harm(
             f"got dtype {unprotected.dtype}"
         )
     dv_ego, dv_obs = delta_v(ego_mass, obs_mass, ego_vel, obs_vel)
-    ep = _vectors("ego_pos", ego_pos, "[m]")
-    op = _vectors("obs_pos", obs_pos, "[m]")
+    ep = vector_array("ego_pos", ego_pos, "[m]")
+    op = vector_array("obs_pos", obs_pos, "[m]")
     if dv_correction is not None:
         if ego_shape is None or obs_shape is None:
             raise ValueError(
                 "collision_harm: dv_correction needs ego_shape=(length, width) and "
                 "obs_shape=(length, width) [m] for the impact offset"
             )
-        ev = _vectors("ego_vel", ego_vel, "[m/s]")
-        ov = _vectors("obs_vel", obs_vel, "[m/s]")
+        ev = vector_array("ego_vel", ego_vel, "[m/s]")
+        ov = vector_array("obs_vel", obs_vel, "[m/s]")
         offset = impact_offset_fraction(
             ep, ev, ego_yaw, ego_shape[0], ego_shape[1], op, ov, obs_yaw, obs_shape[0], obs_shape[1]
         )

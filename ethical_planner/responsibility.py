@@ -22,6 +22,7 @@ import numpy as np
 
 from ethical_planner.config import ResponsibilityConfig
 from ethical_planner.environment import RoadEnvironment
+from ethical_planner.geometry import wrap_angle_in_place
 from ethical_planner.harm import impact_angles
 from ethical_planner.prediction.base import Prediction
 from ethical_planner.road_users import LegalCorridor, RoadUser, RoadUserType
@@ -160,8 +161,7 @@ def responsibilities(
 
     # Rear-end: same direction of travel, one body's front meets the other's rear.
     ego_angle, obs_angle = impact_angles(ex, ey, eyaw, ox, oy, oyaw)
-    # |yaw difference wrapped to (-pi, pi]| < 45 deg.
-    same_direction = np.abs(np.remainder(eyaw - oyaw + np.pi, 2.0 * np.pi) - np.pi) < _FRONT
+    same_direction = np.abs(wrap_angle_in_place(eyaw - oyaw)) < _FRONT
     ego_follows = same_direction & (np.abs(ego_angle) < _FRONT) & (np.abs(obs_angle) > _REAR)
     obs_follows = same_direction & (np.abs(obs_angle) < _FRONT) & (np.abs(ego_angle) > _REAR)
     r_ego = r_ego + np.where(ego_follows, config.rear_end, 0.0)

@@ -16,6 +16,7 @@ from ethical_planner.collision_probability import _parallel_for, _submit, _threa
 from ethical_planner.config import RiskConfig
 from ethical_planner.dv_correction import DeltaVCorrection
 from ethical_planner.environment import RoadEnvironment
+from ethical_planner.geometry import rectangle_corners
 from ethical_planner.harm import HarmModel, boundary_harm, collision_harm
 from ethical_planner.prediction.base import Prediction
 from ethical_planner.road_users import Shape
@@ -49,16 +50,6 @@ class RiskAssessment:
     outside_road: np.ndarray
     boundary_risk: np.ndarray
     ego_combined: np.ndarray
-
-
-def footprint_corners(
-    x: np.ndarray, y: np.ndarray, yaw: np.ndarray, length: float, width: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Corners of rectangles centred at (x, y); inputs any shape S, outputs S + (4,)."""
-    c, s = np.cos(yaw)[..., None], np.sin(yaw)[..., None]
-    half_l = 0.5 * length * np.array([1.0, 1.0, -1.0, -1.0])
-    half_w = 0.5 * width * np.array([1.0, -1.0, -1.0, 1.0])
-    return x[..., None] + c * half_l - s * half_w, y[..., None] + s * half_l + c * half_w
 
 
 #: From this many candidate poses (n * n_t) the road-edge test overlaps the collision
@@ -97,7 +88,7 @@ def outside_drivable_area(candidates: Candidates, shape: Shape, environment: Roa
     outside = np.zeros(candidates.x.shape, dtype=bool)
     edge = np.flatnonzero(~deep)
     if edge.size:
-        cx, cy = footprint_corners(
+        cx, cy = rectangle_corners(
             candidates.x.ravel()[edge],
             candidates.y.ravel()[edge],
             candidates.yaw.ravel()[edge],

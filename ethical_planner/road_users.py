@@ -12,6 +12,8 @@ from enum import StrEnum
 
 import numpy as np
 
+from ethical_planner.validation import check_finite, check_positive, parse_enum
+
 
 class RoadUserType(StrEnum):
     """Type of a road user, spelled as in CommonRoad's obstacle types."""
@@ -30,11 +32,7 @@ class RoadUserType(StrEnum):
     @classmethod
     def parse(cls, value: str | RoadUserType) -> RoadUserType:
         """Return the type named by ``value`` or raise a ValueError listing the allowed names."""
-        try:
-            return cls(value)
-        except ValueError:
-            allowed = ", ".join(t.value for t in cls)
-            raise ValueError(f"unknown road-user type {value!r}; allowed: {allowed}") from None
+        return parse_enum(cls, value, "road-user type")
 
 
 #: Road users without a crash structure around them (paper: unprotected).
@@ -79,12 +77,6 @@ def mass_of(kind: RoadUserType, length: float, width: float) -> float:
     return _FIXED_MASS_KG[kind]
 
 
-def _require_finite(owner: str, **values: float) -> None:
-    for name, value in values.items():
-        if not math.isfinite(value):
-            raise ValueError(f"{owner}.{name} must be a finite number, got {value!r}")
-
-
 @dataclass(frozen=True, slots=True)
 class Shape:
     """Rectangular footprint [m]; pedestrians are approximated by a small square."""
@@ -93,9 +85,7 @@ class Shape:
     width: float
 
     def __post_init__(self) -> None:
-        _require_finite("Shape", length=self.length, width=self.width)
-        if self.length <= 0 or self.width <= 0:
-            raise ValueError(f"Shape.length and Shape.width must be > 0 m, got {self.length} x {self.width}")
+        check_positive("Shape", length=self.length, width=self.width)
 
 
 #: Default shapes [m] used when a scenario gives only a type.
@@ -138,7 +128,7 @@ class KinematicState:
     yaw_rate: float = 0.0
 
     def __post_init__(self) -> None:
-        _require_finite(
+        check_finite(
             "KinematicState",
             x=self.x,
             y=self.y,
@@ -178,7 +168,7 @@ class LegalCorridor:
     max_deceleration: float = 8.0
 
     def __post_init__(self) -> None:
-        _require_finite(
+        check_finite(
             "LegalCorridor",
             speed_limit=self.speed_limit,
             lateral_half_width=self.lateral_half_width,
@@ -190,7 +180,7 @@ class LegalCorridor:
         if self.max_acceleration < 0 or self.max_deceleration <= 0:
             raise ValueError("LegalCorridor.max_acceleration must be >= 0 and max_deceleration > 0 m/s^2")
         if self.stop_distance is not None:
-            _require_finite("LegalCorridor", stop_distance=self.stop_distance)
+            check_finite("LegalCorridor", stop_distance=self.stop_distance)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -297,7 +287,7 @@ class RoadUser:
             raise ValueError(f"RoadUser.history must be a MotionHistory or None, got {kind}")
         if math.isnan(self.mass):
             object.__setattr__(self, "mass", mass_of(self.type, self.shape.length, self.shape.width))
-        _require_finite("RoadUser", mass=self.mass)
+        check_finite("RoadUser", mass=self.mass)
         if self.mass <= 0:
             raise ValueError(f"RoadUser.mass must be > 0 kg, got {self.mass}")
 

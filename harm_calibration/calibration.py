@@ -31,8 +31,8 @@ from ethical_planner.dv_correction import (
     DEFAULT_ANGLE_EDGES_DEG,
     DEFAULT_OFFSET_EDGES,
     DeltaVCorrection,
-    impact_offset_fraction,
 )
+from ethical_planner.geometry import impact_offset_fraction
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, RoadUserType
 from harm_calibration.geometry import Footprint, launch_geometry
 
@@ -262,7 +262,7 @@ def row_offset_fractions(rows: Sequence[dict[str, Any]]) -> np.ndarray:
     with the rows' speeds) and ``impact_offset_fraction`` is evaluated on them with the
     planner's rectangular shapes (ego ``EGO_SHAPE``, partner ``DEFAULT_SHAPES``). Other
     rows (closed-loop runs) keep their ``offset`` column, which ``rows.row_from_record``
-    computed from the pre-impact states (equal for rectangular footprints).
+    computed from the pre-impact states with the same function.
 
     Args:
         rows: impact rows with the columns of ``rows.COLUMNS``.

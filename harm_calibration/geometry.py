@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
+from ethical_planner.geometry import rectangle_corners
+
 #: Gap between the footprints at launch, along the approach line [m].
 LAUNCH_GAP_M = 0.05
 #: Vertices of the polygon circumscribing a round (pedestrian) proxy.
@@ -58,11 +60,10 @@ class Footprint:
             r = 0.5 * min(self.length, self.width) / math.cos(math.pi / _ROUND_VERTICES)
             t = np.linspace(0.0, 2 * math.pi, _ROUND_VERTICES, endpoint=False)
             pts = r * np.column_stack([np.cos(t), np.sin(t)])
-        else:
-            hl, hw = 0.5 * self.length, 0.5 * self.width
-            pts = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
-        c, s = math.cos(yaw), math.sin(yaw)
-        return pts @ np.array([[c, s], [-s, c]])
+            c, s = math.cos(yaw), math.sin(yaw)
+            return pts @ np.array([[c, s], [-s, c]])
+        x, y = rectangle_corners(0.0, 0.0, yaw, self.length, self.width)
+        return np.column_stack([x, y])
 
 
 def configuration_space(a: Footprint, yaw_a: float, b: Footprint, yaw_b: float) -> np.ndarray:
@@ -81,31 +82,6 @@ def edge_offset(hull: np.ndarray, direction: np.ndarray) -> float:
     """Largest perpendicular offset [m] of an approach line along ``direction`` that still hits ``hull``."""
     n = np.array([-direction[1], direction[0]])
     return float(np.max(hull @ n))
-
-
-def offset_fraction(
-    a: Footprint, yaw_a: float, b: Footprint, yaw_b: float, rel_pos: np.ndarray, rel_vel: np.ndarray
-) -> float:
-    """Lateral offset of an approach as a fraction of the edge offset (0 central, 1 grazing).
-
-    Args:
-        a: footprint of body a.
-        yaw_a: heading of a [rad].
-        b: footprint of body b.
-        yaw_b: heading of b [rad].
-        rel_pos: centre of b minus centre of a [m], shape (2,).
-        rel_vel: velocity of b minus velocity of a [m/s], shape (2,).
-
-    Returns:
-        |offset| / edge offset, nan if the relative speed is zero.
-    """
-    speed = float(np.hypot(*rel_vel))
-    if speed < 1e-9:
-        return math.nan
-    w = np.asarray(rel_vel, dtype=float) / speed
-    n = np.array([-w[1], w[0]])
-    hull = configuration_space(a, yaw_a, b, yaw_b)
-    return abs(float(np.dot(rel_pos, n))) / edge_offset(hull, w)
 
 
 def classify(angle_deg: float, offset: float) -> str:

@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
+from ethical_planner.geometry import impact_offset_fraction, velocity_angle
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, RoadUserType
-from harm_calibration.geometry import STATIC, Footprint, classify, offset_fraction
+from harm_calibration.geometry import STATIC, classify
 
 #: Identification and design columns (sweep design values; derived for runs).
 KEY_COLUMNS = (
@@ -47,10 +48,10 @@ def _num(value: Any) -> float:
     return math.nan if value is None else float(value)
 
 
-def _footprint(body: Mapping[str, Any]) -> Footprint:
-    kind = RoadUserType(body["type"])
-    shape = EGO_SHAPE if body.get("entity") == 0 else DEFAULT_SHAPES[kind]
-    return Footprint(shape.length, shape.width, kind is RoadUserType.PEDESTRIAN)
+def _shape(body: Mapping[str, Any]) -> tuple[float, float]:
+    """(length, width) [m] of a body, as the planner knows it."""
+    shape = EGO_SHAPE if body.get("entity") == 0 else DEFAULT_SHAPES[RoadUserType(body["type"])]
+    return shape.length, shape.width
 
 
 def _is_static(body: Mapping[str, Any]) -> bool:
@@ -115,17 +116,12 @@ def row_from_record(
         row["class"] = STATIC
         return row
     row["partner"] = b["type"]
-    sa, sb = np.hypot(*va), np.hypot(*vb)
-    if sa > 1e-6 and sb > 1e-6:
-        cos = float(np.dot(va, vb) / (sa * sb))
-        row["angle_deg"] = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
-    else:  # one body at rest: the direction of approach replaces its heading
-        moving, yaw = (va, b["yaw"]) if sa > sb else (vb, a["yaw"])
-        direction = math.atan2(moving[1], moving[0])
-        diff = abs(math.remainder(direction - yaw, 2 * math.pi))
-        row["angle_deg"] = math.degrees(diff)
-    rel_pos = np.asarray(b["position"], float) - np.asarray(a["position"], float)
-    row["offset"] = offset_fraction(_footprint(a), a["yaw"], _footprint(b), b["yaw"], rel_pos, rel_vel)
+    # A body at rest has no velocity direction: its heading stands in for it.
+    row["angle_deg"] = math.degrees(float(velocity_angle(va, vb, a["yaw"], b["yaw"])))
+    offset = impact_offset_fraction(
+        a["position"], va, a["yaw"], *_shape(a), b["position"], vb, b["yaw"], *_shape(b)
+    )
+    row["offset"] = float(offset)
     row["class"] = classify(row["angle_deg"], row["offset"])
     return row
 

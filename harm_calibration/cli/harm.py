@@ -10,6 +10,7 @@ import argparse
 import json
 import math
 
+from ethical_planner.geometry import wrap_angle
 from ethical_planner.harm import (
     DEFAULT_MODEL,
     DEFAULT_PEDESTRIAN_MODEL,
@@ -18,7 +19,6 @@ from ethical_planner.harm import (
     HarmModel,
     coefficients,
     harm,
-    wrap_angle,
 )
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, UNPROTECTED_TYPES, RoadUserType, mass_of
 

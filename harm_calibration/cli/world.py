@@ -6,8 +6,8 @@ import argparse
 import time
 from pathlib import Path
 
+from ethical_planner.validation import check
 from harm_calibration.cli.process import keep_freed_memory
-from mujoco_world.scenario.fields import check
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

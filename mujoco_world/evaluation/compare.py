@@ -26,9 +26,9 @@ from ethical_planner.harm import (
     harm,
     impact_angles,
 )
+from ethical_planner.records import to_plain
 from ethical_planner.road_users import UNPROTECTED_TYPES, VULNERABLE_TYPES, RoadUserType
 from mujoco_world.physics.impact import BodyImpact, ImpactMeasurement, area_name
-from mujoco_world.scenario.fields import to_plain
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ethical_planner.validation import check
 from mujoco_world.loop.runner import GROUPS, OUTCOMES, RunConfig, run_scenario
-from mujoco_world.scenario.fields import check
 from mujoco_world.scenario.spec import Scenario, load_scenario
 
 #: Planner presets of the paper's comparison.

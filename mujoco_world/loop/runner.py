@@ -23,11 +23,12 @@ import numpy as np
 
 from ethical_planner.config import PlannerConfig, preset
 from ethical_planner.planner import Decision, Planner
+from ethical_planner.records import to_plain
 from ethical_planner.road_users import VULNERABLE_TYPES, Shape
+from ethical_planner.validation import check, check_positive
 from mujoco_world.evaluation.compare import ImpactRecord, compare_impact
 from mujoco_world.loop.world import ObservationNoise, World
 from mujoco_world.physics.control import ControlConfig, TrajectoryReference
-from mujoco_world.scenario.fields import check, check_positive, to_plain
 from mujoco_world.scenario.spec import Scenario
 
 #: Run outcomes.

@@ -16,13 +16,14 @@ import mujoco
 import numpy as np
 
 from ethical_planner.environment import RoadEnvironment
+from ethical_planner.geometry import rectangle_corners
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
+from ethical_planner.validation import check_non_negative
 from mujoco_world.agents.behaviour import Fleet, WorldView
 from mujoco_world.physics.control import ControlConfig, TrajectoryReference, brake_forces, tracking_forces
 from mujoco_world.physics.impact import ImpactMeasurement, ImpactRecorder
 from mujoco_world.physics.scene import NO_ENTITY, BodyProxy, Scene
-from mujoco_world.scenario.fields import check_non_negative
 from mujoco_world.scenario.road import build_road
 from mujoco_world.scenario.spec import RoadName, RouteSpec, Scenario
 
@@ -475,13 +476,10 @@ def _occluded(
     n = len(qpos)
     c, s = np.cos(qpos[:, 2]), np.sin(qpos[:, 2])
     hl, hw = 0.5 * length, 0.5 * width
-    # Target points: centre and 4 corners of bodies 1..n-1, shape (n-1, 5, 2).
-    sx = np.array([0.0, 1.0, 1.0, -1.0, -1.0])
-    sy = np.array([0.0, 1.0, -1.0, 1.0, -1.0])
-    lx = sx[None, :] * hl[1:, None] * 0.9
-    ly = sy[None, :] * hw[1:, None] * 0.9
-    px = qpos[1:, 0, None] + lx * c[1:, None] - ly * s[1:, None]
-    py = qpos[1:, 1, None] + lx * s[1:, None] + ly * c[1:, None]
+    # Target points: centre and 4 corners (10 % inside) of bodies 1..n-1, shape (n-1, 5) each.
+    cx, cy = rectangle_corners(qpos[1:, 0], qpos[1:, 1], qpos[1:, 2], 0.9 * length[1:], 0.9 * width[1:])
+    px = np.concatenate([qpos[1:, 0, None], cx], axis=1)
+    py = np.concatenate([qpos[1:, 1, None], cy], axis=1)
     idx = np.flatnonzero(occluders)
     if idx.size == 0:
         return np.zeros(n - 1, dtype=bool)

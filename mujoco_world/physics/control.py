@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mujoco_world.scenario.fields import check_positive
+from ethical_planner.geometry import wrap_angle_in_place
+from ethical_planner.validation import check_positive
 
 GRAVITY = 9.81  # [m/s^2]
 
@@ -51,11 +52,6 @@ class ControlConfig:
         )
 
 
-def wrap(angle: np.ndarray) -> np.ndarray:
-    """Wrap angles [rad] into [-pi, pi)."""
-    return (angle + np.pi) % (2.0 * np.pi) - np.pi
-
-
 def tracking_forces(
     config: ControlConfig,
     mass: np.ndarray,
@@ -91,7 +87,10 @@ def tracking_forces(
     scale = np.minimum(1.0, limit / np.maximum(norm, 1e-9))
     out = np.empty((len(mass), 3))
     out[:, :2] = acc * (scale * mass)[:, None]
-    yaw_acc = config.kp_yaw * wrap(yaw_ref - qpos[:, 2]) + config.kd_yaw * (yaw_rate_ref - qvel[:, 2])
+    # A heading error of exactly +-pi wraps to +pi and turns counter-clockwise (either
+    # way is equally short).
+    heading_error = wrap_angle_in_place(yaw_ref - qpos[:, 2])
+    yaw_acc = config.kp_yaw * heading_error + config.kd_yaw * (yaw_rate_ref - qvel[:, 2])
     lim = config.torque_limit_per_inertia
     out[:, 2] = inertia * np.clip(yaw_acc, -lim, lim)
     return out

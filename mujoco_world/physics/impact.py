@@ -31,9 +31,10 @@ import mujoco
 import numpy as np
 
 from ethical_planner.harm import ReducedArea, clock_area, reduced_area
+from ethical_planner.records import to_plain
 from ethical_planner.road_users import KinematicState
+from ethical_planner.validation import check, check_positive
 from mujoco_world.physics.scene import NO_ENTITY, STATIC, BodyProxy, Scene
-from mujoco_world.scenario.fields import check, check_positive, to_plain
 from mujoco_world.scenario.spec import ContactSpec
 
 #: Contact-free time after which an episode is closed [s].

@@ -24,7 +24,7 @@ from ethical_planner.road_users import (
     RoadUserType,
     mass_of,
 )
-from mujoco_world.scenario.fields import check, check_positive
+from ethical_planner.validation import check, check_positive
 from mujoco_world.scenario.road import StaticBox
 from mujoco_world.scenario.spec import Boundary, ContactSpec
 

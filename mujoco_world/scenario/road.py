@@ -15,7 +15,7 @@ import numpy as np
 import shapely
 from shapely.geometry import LineString, MultiLineString, Polygon, box
 
-from mujoco_world.scenario.fields import check
+from ethical_planner.validation import check
 from mujoco_world.scenario.spec import Boundary, RoadKind, RoadName, RoadSpec, RouteSpec, Turn
 
 #: Spacing of sampled centre lines [m].

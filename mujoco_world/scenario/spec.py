@@ -13,22 +13,29 @@ are measured along a road user's own route from its start.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
+from ethical_planner.records import errors_in, from_mapping, read_toml
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, RoadUserType
-from mujoco_world.scenario.fields import (
-    check,
-    check_finite,
-    check_non_negative,
-    check_positive,
-    from_mapping,
-    knots,
-    parse_enum,
-)
+from ethical_planner.validation import check, check_finite, check_non_negative, check_positive, parse_enum
+
+
+def knots(owner: str, name: str, value: Any) -> tuple[tuple[float, float], ...]:
+    """Validate a sequence of (time [s], value) knots with strictly increasing times."""
+    try:
+        pairs = tuple((float(t), float(v)) for t, v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{owner}.{name} must be a list of [time, value] pairs, got {value!r}") from None
+    for t, v in pairs:
+        if not (math.isfinite(t) and math.isfinite(v)):
+            raise ValueError(f"{owner}.{name} must hold finite numbers, got {value!r}")
+    times = [t for t, _ in pairs]
+    if any(b <= a for a, b in zip(times, times[1:], strict=False)) or (times and times[0] < 0):
+        raise ValueError(f"{owner}.{name} times must be >= 0 and strictly increasing, got {times}")
+    return pairs
 
 
 class RoadKind(StrEnum):
@@ -113,8 +120,8 @@ class RoadSpec:
     corner_radius: float = 8.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "kind", parse_enum(RoadKind, "road", "kind", self.kind))
-        object.__setattr__(self, "boundary", parse_enum(Boundary, "road", "boundary", self.boundary))
+        object.__setattr__(self, "kind", parse_enum(RoadKind, self.kind, "road kind", "road.kind"))
+        object.__setattr__(self, "boundary", parse_enum(Boundary, self.boundary, "boundary", "road.boundary"))
         check_positive(
             "road",
             length=self.length,
@@ -187,8 +194,8 @@ class RouteSpec:
     waypoints: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "road", parse_enum(RoadName, "route", "road", self.road))
-        object.__setattr__(self, "turn", parse_enum(Turn, "route", "turn", self.turn))
+        object.__setattr__(self, "road", parse_enum(RoadName, self.road, "road name", "route.road"))
+        object.__setattr__(self, "turn", parse_enum(Turn, self.turn, "turn", "route.turn"))
         check(
             isinstance(self.lane, int) and self.lane >= 0,
             f"route.lane must be an integer >= 0, got {self.lane!r}",
@@ -308,7 +315,7 @@ class BehaviourSpec:
     crossing: CrossingSpec | None = None
 
     def __post_init__(self) -> None:
-        kind = parse_enum(BehaviourKind, "behaviour", "kind", self.kind)
+        kind = parse_enum(BehaviourKind, self.kind, "behaviour kind", "behaviour.kind")
         object.__setattr__(self, "kind", kind)
         check_non_negative("behaviour", speed=self.speed, start_time=self.start_time)
         check_positive("behaviour", trigger_distance=self.trigger_distance)
@@ -448,7 +455,7 @@ class EgoSpec:
             object.__setattr__(self, "type", RoadUserType.parse(self.type))
         except ValueError as error:
             raise ValueError(f"ego.type: {error}") from None
-        object.__setattr__(self, "turn", parse_enum(Turn, "ego", "turn", self.turn))
+        object.__setattr__(self, "turn", parse_enum(Turn, self.turn, "turn", "ego.turn"))
         check_positive("ego", length=self.length, width=self.width, mass=self.mass)
         check_non_negative("ego", speed=self.speed, desired_speed=self.desired_speed)
         check_finite("ego", s0=self.s0, goal_s=self.goal_s)
@@ -612,15 +619,6 @@ def load_scenario(path: str | Path) -> Scenario:
         ValueError: unreadable TOML, unknown keys or invalid values; the message names
             the file and the field.
     """
-    path = Path(path)
-    try:
-        with path.open("rb") as handle:
-            data = tomllib.load(handle)
-    except OSError as error:
-        raise ValueError(f"cannot read scenario file {path}: {error.strerror}") from None
-    except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"{path}: not valid TOML: {error}") from None
-    try:
+    data = read_toml(path, "scenario")
+    with errors_in(path):
         return scenario_from_dict(data)
-    except ValueError as error:
-        raise ValueError(f"{path}: {error}") from None

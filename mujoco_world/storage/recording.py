@@ -40,10 +40,10 @@ import shapely
 
 from ethical_planner.planner import Decision
 from ethical_planner.road_users import RoadUserType
+from ethical_planner.validation import check
 from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.loop.runner import RunObserver, RunSummary
 from mujoco_world.loop.world import World
-from mujoco_world.scenario.fields import check
 from mujoco_world.scenario.road import offset_polyline
 from mujoco_world.scenario.spec import Scenario
 

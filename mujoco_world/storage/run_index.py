@@ -45,9 +45,9 @@ from typing import Any
 import numpy as np
 
 from ethical_planner.planner import Decision
+from ethical_planner.validation import check, check_positive
 from mujoco_world.loop.runner import GROUPS, RunObserver, RunSummary
 from mujoco_world.loop.world import World
-from mujoco_world.scenario.fields import check, check_positive
 from mujoco_world.scenario.spec import Scenario
 
 #: File name of the index inside an output root.

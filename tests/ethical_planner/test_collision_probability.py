@@ -583,7 +583,8 @@ def test_drivable_area_shortcut_matches_the_corner_test():
     # corner (the others lie deep inside the eroded area); it must agree with testing
     # every corner, on a curved road with candidates hugging and crossing its edges.
     from ethical_planner.environment import RoadEnvironment
-    from ethical_planner.risk import footprint_corners, outside_drivable_area
+    from ethical_planner.geometry import rectangle_corners
+    from ethical_planner.risk import outside_drivable_area
     from ethical_planner.road_users import Shape
 
     env = RoadEnvironment.along_path(
@@ -602,7 +603,7 @@ def test_drivable_area_shortcut_matches_the_corner_test():
     poses = _Poses()
     poses.x, poses.y, poses.yaw = x, y, yaw
     shape = Shape(4.5, 1.8)
-    cx, cy = footprint_corners(x, y, yaw, shape.length, shape.width)
+    cx, cy = rectangle_corners(x, y, yaw, shape.length, shape.width)
     brute = ~np.all(shapely.contains_xy(env.drivable_area, cx, cy), axis=-1)
     fast = outside_drivable_area(poses, shape, env)
     assert 0.1 < brute.mean() < 0.9

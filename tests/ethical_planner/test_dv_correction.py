@@ -6,7 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ethical_planner.dv_correction import DeltaVCorrection, impact_offset_fraction, velocity_angle
+from ethical_planner.dv_correction import DeltaVCorrection
+from ethical_planner.geometry import impact_offset_fraction, velocity_angle
 from ethical_planner.harm import collision_harm
 
 EGO = (4.0, 2.0)  # length, width [m]

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from ethical_planner.dv_correction import DeltaVCorrection as PlannerCorrection
-from ethical_planner.dv_correction import impact_offset_fraction
+from ethical_planner.geometry import impact_offset_fraction
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, RoadUserType
 from harm_calibration.analysis import summarize, write_report
 from harm_calibration.calibration import (
@@ -15,7 +15,13 @@ from harm_calibration.calibration import (
     fit_delta_v_correction,
     row_offset_fractions,
 )
-from harm_calibration.geometry import Footprint, launch_geometry, offset_fraction, speeds_for_closing
+from harm_calibration.geometry import (
+    Footprint,
+    configuration_space,
+    edge_offset,
+    launch_geometry,
+    speeds_for_closing,
+)
 from harm_calibration.sweep import GRIDS, PARTNER_SPEED_CAP, Grid, run_sweep
 
 EDGES = (0.0, 60.0, 120.0, 180.0)
@@ -119,7 +125,11 @@ def test_sweep_offset_agrees_with_the_planners(grid):
     worst: dict[bool, float] = {True: 0.0, False: 0.0}
     for case, ego, partner, shape, _, _, launch in _launches(grid):
         rel_vel = np.subtract(launch.velocity_b, launch.velocity_a)
-        sweep = offset_fraction(ego, 0.0, partner, launch.yaw_b, np.asarray(launch.position_b), rel_vel)
+        w = rel_vel / np.hypot(*rel_vel)
+        # perpendicular distance of b's centre from the approach line through a's centre,
+        # over the largest one that still touches (the sweep's own hull, round pedestrians)
+        hull = configuration_space(ego, 0.0, partner, launch.yaw_b)
+        sweep = abs(float(np.dot(launch.position_b, [-w[1], w[0]]))) / edge_offset(hull, w)
         planner = impact_offset_fraction(
             (0.0, 0.0), launch.velocity_a, 0.0, ego.length, ego.width,
             launch.position_b, launch.velocity_b, launch.yaw_b, shape.length, shape.width,

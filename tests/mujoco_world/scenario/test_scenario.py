@@ -48,14 +48,17 @@ def test_example_file_loads_and_builds():
     ("patch", "message"),
     [
         ({"roads": {}}, "unknown key 'roads'"),
-        ({"road": {"lenght": 3}}, r"road: unknown key 'lenght'"),
+        ({"road": {"lenght": 3}}, r"unknown key 'road.lenght'; allowed: "),
         ({"road": {"lanes": 0}}, r"road.lanes must be an integer in 1..8"),
-        ({"road": {"kind": "roundabout"}}, r"road.kind: unknown value 'roundabout'"),
+        (
+            {"road": {"kind": "roundabout"}},
+            r"road.kind: unknown road kind 'roundabout'; allowed: straight, curved, intersection",
+        ),
         ({"ego": {"speed": -1.0}}, r"ego.speed must be >= 0"),
         ({"duration": float("nan")}, r"scenario.duration must be a finite number"),
         (
             {"road_users": [{"name": "x", "type": "car", "behaviour": {"kind": "idm", "sped": 3}}]},
-            r"road_users\[0\].behaviour: unknown key 'sped'",
+            r"unknown key 'road_users\[0\].behaviour.sped'",
         ),
         (
             {"road_users": [{"name": "x", "type": "spaceship"}]},
