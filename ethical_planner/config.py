@@ -96,16 +96,44 @@ class VehicleLimits:
 
 @dataclass(frozen=True, slots=True)
 class PredictionConfig:
-    """Constant-turn-rate prediction with a covariance growing over the horizon.
+    """Prediction of the other road users, with a covariance growing over the horizon.
 
-    Standard deviations in the road user's heading frame:
-    sigma_long(t) = sigma0_long + (growth_long + growth_long_per_speed * v) t,
-    sigma_lat(t) = sigma0_lat + growth_lat t; pedestrians use ``pedestrian_growth`` in
-    both directions. Eigenvalues below ``covariance_floor`` [m^2] are raised to it.
-    ``model`` names the predictor in ``ethical_planner.prediction.PREDICTORS``.
+    ``model`` names the predictor in ``ethical_planner.prediction.PREDICTORS``:
+    ``"constant_acceleration"`` (the default) keeps each road user's observed
+    acceleration until it stops (never reversing) and lets its observed turn rate
+    decay; ``"constant_turn_rate"`` keeps speed and turn rate.
+
+    Standard deviations in the road user's heading frame, with tau the time of motion
+    (t, or the predicted stop time if earlier; the constant-turn-rate model uses t):
+    sigma_long(t) = sigma0_long + (growth_long + growth_long_per_speed v) tau
+    + 0.5 sigma_a tau^2, sigma_a = acceleration_sigma + acceleration_sigma_per_observed |a|
+    (the constant-turn-rate model has no acceleration term);
+    sigma_lat(t) = sigma0_lat + growth_lat t. Pedestrians use ``pedestrian_growth`` in
+    both directions instead of the growth terms. Eigenvalues below ``covariance_floor``
+    [m^2] are raised to it.
+
+    Attributes:
+        model: predictor name.
+        sigma0_long, sigma0_lat: standard deviations at t = 0 [m].
+        growth_long, growth_lat: growth of the standard deviations [m/s].
+        growth_long_per_speed: extra longitudinal growth per m/s of speed [1].
+        pedestrian_growth: growth of both standard deviations of pedestrians [m/s].
+        covariance_floor: smallest covariance eigenvalue [m^2].
+        use_turn_rate: False predicts straight lines.
+        turn_rate_time_constant: the observed turn rate decays as exp(-t / this) [s]
+            (constant-acceleration model): a swerve is an episode, not a circle. With
+            the default 0.8 s a turn rate keeps acting for 0.8 s in total.
+        acceleration_time_constant: an observed positive acceleration decays as
+            exp(-t / this) [s] (an acceleration phase ends; braking to a stop is held
+            at its observed value).
+        acceleration_sigma: uncertainty of the future acceleration [m/s^2].
+        acceleration_sigma_per_observed: extra uncertainty per m/s^2 of observed
+            acceleration [1] (a braking road user may brake harder or release).
+        max_observed_acceleration: observed accelerations are clipped to +- this
+            [m/s^2] (finite differences through a contact are not a driver's input).
     """
 
-    model: str = "constant_turn_rate"
+    model: str = "constant_acceleration"
 
     sigma0_long: float = 0.3
     sigma0_lat: float = 0.2
@@ -115,6 +143,11 @@ class PredictionConfig:
     pedestrian_growth: float = 0.5
     covariance_floor: float = 0.1
     use_turn_rate: bool = True
+    turn_rate_time_constant: float = 0.8
+    acceleration_time_constant: float = 1.0
+    acceleration_sigma: float = 0.5
+    acceleration_sigma_per_observed: float = 0.2
+    max_observed_acceleration: float = 10.0
 
     def __post_init__(self) -> None:
         check_numeric_fields_finite("prediction", self)
@@ -124,6 +157,8 @@ class PredictionConfig:
             if not isinstance(value, bool | str):
                 check(value >= 0, f"prediction.{f.name} must be >= 0, got {value}")
         check(self.covariance_floor > 0, "prediction.covariance_floor must be > 0 m^2")
+        for name in ("turn_rate_time_constant", "acceleration_time_constant"):
+            check(getattr(self, name) > 0, f"prediction.{name} must be > 0 s")
 
 
 @dataclass(frozen=True, slots=True)

@@ -35,22 +35,69 @@ class CostBreakdown:
         return {name: float(getattr(self, name)[index]) for name in self.__slots__}
 
 
-def bayes(risks: np.ndarray) -> np.ndarray:
-    """J_B = sum(S_R) / |S_R| (Eq. 8); ``risks`` (n, m), 0 for m = 0."""
-    return risks.mean(axis=1) if risks.shape[1] else np.zeros(risks.shape[0])
+def risk_set(
+    risk_obs: np.ndarray, risk_ego: np.ndarray, boundary_risk: np.ndarray, leaves_road: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The set S_R of every candidate and which of its entries exist.
+
+    S_R holds R_k for every road user and R_ego,k for the ego with every partner: 2k
+    entries (paper Eqs. 8-9, as the reference does). A candidate that leaves the road
+    has one more potential collision, the ego's with the road edge: its risk is an
+    entry of the ego's in S_R for that candidate only. For a candidate on the road no
+    such entry exists (an entry of 0 would turn J_E = |R_k - R_ego,k| into
+    2/3 max(R_k, R_ego,k) with one road user).
+
+    Args:
+        risk_obs: (n, k) R_k. risk_ego: (n, k) R_ego,k.
+        boundary_risk: (n,) the ego's risk at the road edge (0 on the road).
+        leaves_road: (n,) True where the candidate leaves the drivable area.
+
+    Returns:
+        (risks (n, 2k + 1), present (n, 2k + 1)): the last column is the road edge.
+    """
+    n, k = risk_obs.shape
+    risks = np.concatenate([risk_obs, risk_ego, boundary_risk[:, None]], axis=1)
+    present = np.concatenate([np.ones((n, 2 * k), dtype=bool), leaves_road[:, None]], axis=1)
+    return risks, present
 
 
-def equality(risks: np.ndarray) -> np.ndarray:
-    """J_E = sum_{i<j} |R_i - R_j| / (m (m - 1) / 2) (Eq. 9), in O(m log m).
+def _present(risks: np.ndarray, present: np.ndarray | None) -> np.ndarray:
+    return np.ones(risks.shape, dtype=bool) if present is None else np.asarray(present, dtype=bool)
+
+
+def bayes(risks: np.ndarray, present: np.ndarray | None = None) -> np.ndarray:
+    """J_B = sum(S_R) / |S_R| (Eq. 8), 0 for an empty set.
+
+    Args:
+        risks: (n, m) candidate risks.
+        present: (n, m) which entries belong to each candidate's S_R (default all).
+    """
+    mask = _present(risks, present)
+    count = mask.sum(axis=1)
+    return np.where(mask, risks, 0.0).sum(axis=1) / np.maximum(count, 1)
+
+
+def equality(risks: np.ndarray, present: np.ndarray | None = None) -> np.ndarray:
+    """J_E = sum_{i<j} |R_i - R_j| / (m (m - 1) / 2) (Eq. 9) in O(m log m), 0 for m < 2.
 
     For ascending values x_(0..m-1): sum_{i<j} |x_i - x_j| = sum_i (2 i - m + 1) x_(i).
+
+    Args:
+        risks: (n, m) candidate risks.
+        present: (n, m) which entries belong to each candidate's S_R (default all);
+            m is counted per candidate.
     """
-    n, m = risks.shape
-    if m < 2:
+    mask = _present(risks, present)
+    n, width = risks.shape
+    if width < 2:
         return np.zeros(n)
-    ordered = np.sort(risks, axis=1)
-    coefficients = 2.0 * np.arange(m) - m + 1.0
-    return (ordered @ coefficients) / (m * (m - 1) / 2.0)
+    m = mask.sum(axis=1, keepdims=True)
+    ordered = np.sort(np.where(mask, risks, np.inf), axis=1)  # absent entries last
+    rank = np.arange(width)[None, :]
+    coefficients = np.where(rank < m, 2.0 * rank - m + 1.0, 0.0)
+    total = (np.where(rank < m, ordered, 0.0) * coefficients).sum(axis=1)
+    pairs = (m[:, 0] * (m[:, 0] - 1)) / 2.0
+    return np.where(pairs > 0, total / np.maximum(pairs, 1.0), 0.0)
 
 
 def maximin(harms: np.ndarray, counted: np.ndarray, gamma: float) -> np.ndarray:
@@ -66,18 +113,19 @@ def maximin(harms: np.ndarray, counted: np.ndarray, gamma: float) -> np.ndarray:
     return worst**gamma
 
 
-def responsibility(risks: np.ndarray, r: np.ndarray) -> np.ndarray:
+def responsibility(risks: np.ndarray, r: np.ndarray, present: np.ndarray | None = None) -> np.ndarray:
     """J_R = sum(r_i R_i) / |S_R| (Eq. 11), normalised like J_B.
 
     With the same normalisation, w_B (J_B - J_R) = w_B / |S_R| sum (1 - r_i) R_i >= 0
     for r_i < 1: responsibility lowers the weight of a responsible road user's risk
     but never rewards raising it.
     """
-    return (r * risks).mean(axis=1) if risks.shape[1] else np.zeros(risks.shape[0])
+    return bayes(r * risks, present)
 
 
 def total_cost(
     risks: np.ndarray,
+    present: np.ndarray,
     r: np.ndarray,
     harms: np.ndarray,
     counted: np.ndarray,
@@ -92,8 +140,8 @@ def total_cost(
     """Cost of every candidate.
 
     Args:
-        risks: (n, m) the set S_R: R_k for every road user, R_ego,k for every
-            partner, and the ego's boundary risk.
+        risks: (n, m) the set S_R (see ``risk_set``).
+        present: (n, m) which entries belong to each candidate's S_R.
         r: (n, m) responsibility of each entry.
         harms: (n, m) harm of each entry.
         counted: (n, m) whether it counts for maximin.
@@ -105,10 +153,10 @@ def total_cost(
         levels: (n,) validity levels.
         weights: the weights.
     """
-    j_b = bayes(risks)
-    j_e = equality(risks)
+    j_b = bayes(risks, present)
+    j_e = equality(risks, present)
     j_m = maximin(harms, counted, weights.maximin_gamma)
-    j_r = responsibility(risks, r)
+    j_r = responsibility(risks, r, present)
     j_risk = (
         weights.bayes * j_b
         + weights.equality * j_e

@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 
 from ethical_planner.config import PlannerConfig
-from ethical_planner.cost import CostBreakdown, total_cost
+from ethical_planner.cost import CostBreakdown, risk_set, total_cost
 from ethical_planner.dv_correction import DeltaVCorrection
 from ethical_planner.environment import RoadEnvironment
-from ethical_planner.prediction import Prediction, predict_constant_turn_rate
+from ethical_planner.prediction import Prediction, Predictor, make_predictor
 from ethical_planner.responsibility import LegalCorridors, responsibilities
 from ethical_planner.risk import RiskAssessment, assess_risk
 from ethical_planner.road_users import EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser, RoadUserType, Shape
@@ -186,6 +186,8 @@ class Planner:
         environment: the road.
         ego_shape: footprint of the ego [m].
         ego_mass: [kg].
+        predictor: predicts the road users when ``plan`` is given no prediction; by
+            default the one named by ``config.prediction.model``.
     """
 
     def __init__(
@@ -194,6 +196,7 @@ class Planner:
         environment: RoadEnvironment,
         ego_shape: Shape = EGO_SHAPE,
         ego_mass: float = EGO_MASS_KG,
+        predictor: Predictor | None = None,
     ) -> None:
         if not isinstance(config, PlannerConfig):
             raise ValueError("config must be a PlannerConfig (see ethical_planner.preset)")
@@ -203,7 +206,10 @@ class Planner:
             raise ValueError("ego_shape must be a Shape")
         if not (math.isfinite(ego_mass) and ego_mass > 0):
             raise ValueError(f"ego_mass must be a finite mass > 0 kg, got {ego_mass}")
+        if predictor is not None and not isinstance(predictor, Predictor):
+            raise ValueError("predictor must follow the Predictor protocol: name, predict(road_users, times)")
         self.config = config
+        self.predictor = predictor if predictor is not None else make_predictor(config.prediction)
         self.environment = environment
         self.ego_shape = ego_shape
         self.ego_mass = float(ego_mass)
@@ -254,7 +260,8 @@ class Planner:
         timings["validity"] = timings.get("validity", 0.0) + _since(clock)
         clock = time.perf_counter()
         n = candidates.n_traj
-        risks = np.concatenate([risk.risk_obs, risk.risk_ego, risk.boundary_risk[:, None]], axis=1)
+        leaves = risk.outside_road.any(axis=1)
+        risks, present = risk_set(risk.risk_obs, risk.risk_ego, risk.boundary_risk, leaves)
         r = np.concatenate([r_obs, r_ego, np.zeros((n, 1))], axis=1)
         counted_p = risk.probability > config.weights.maximin_epsilon
         harms = np.concatenate(
@@ -266,9 +273,10 @@ class Planner:
             axis=1,
         )
         counted_pair = counted_p.any(axis=2)  # the same collisions count for both bodies
-        counted = np.concatenate([counted_pair, counted_pair, risk.outside_road.any(axis=1)[:, None]], axis=1)
+        counted = np.concatenate([counted_pair, counted_pair, leaves[:, None]], axis=1)
         costs = total_cost(
             risks,
+            present,
             r,
             harms,
             counted,
@@ -295,7 +303,7 @@ class Planner:
             ego_state: current state of the ego's centre.
             road_users: every other road user the ego perceives (may be empty).
             prediction: a prediction on the planner's time grid; by default the
-                constant-turn-rate predictor of ``config.prediction``.
+                planner's predictor (``config.prediction.model``) makes one.
 
         Returns:
             The decision; never None. If every candidate is physically invalid, the
@@ -313,14 +321,13 @@ class Planner:
         timings["sampling"] = _since(clock)
         clock = time.perf_counter()
         if prediction is None:
-            prediction = predict_constant_turn_rate(road_users, candidates.t, config.prediction)
-        elif prediction.mean.shape[1] != len(candidates.t):
+            prediction = self.predictor.predict(road_users, candidates.t)
+        if prediction.mean.shape[1] != len(candidates.t):
             raise ValueError(
                 f"prediction has {prediction.mean.shape[1]} steps; the planner needs "
                 f"{len(candidates.t)} (horizon {max(config.sampling.horizons)} s, dt {config.sampling.dt} s)"
             )
-        else:
-            prediction = prediction.with_covariance_floor(config.prediction.covariance_floor)
+        prediction = prediction.with_covariance_floor(config.prediction.covariance_floor)
         if len(road_users) != prediction.n_obs:
             raise ValueError(
                 f"prediction covers {prediction.n_obs} road users but {len(road_users)} were given"

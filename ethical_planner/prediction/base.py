@@ -152,6 +152,62 @@ def make_predictor(config: PredictionConfig) -> Predictor:
     return PREDICTORS.get(config.model)(config)
 
 
+def rotated_covariance(sigma_long: np.ndarray, sigma_lat: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """Covariance [m^2] of standard deviations along and across ``heading`` [rad].
+
+    Inputs broadcast against each other; the output has their shape + (2, 2).
+    """
+    c, s = np.cos(heading), np.sin(heading)
+    var_l, var_t = sigma_long**2, sigma_lat**2
+    cov = np.empty(np.broadcast(c, var_l, var_t).shape + (2, 2))
+    cov[..., 0, 0] = c * c * var_l + s * s * var_t
+    cov[..., 1, 1] = s * s * var_l + c * c * var_t
+    cov[..., 0, 1] = cov[..., 1, 0] = c * s * (var_l - var_t)
+    return cov
+
+
+def growing_sigmas(
+    road_users: Sequence[RoadUser],
+    speed: np.ndarray,
+    tau: np.ndarray,
+    t: np.ndarray,
+    config: PredictionConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Standard deviations [m] along and across the heading without an acceleration term.
+
+    sigma_long = sigma0_long + (growth_long + growth_long_per_speed |v|) tau,
+    sigma_lat = sigma0_lat + growth_lat t; pedestrians grow by ``pedestrian_growth``
+    in both directions, parked vehicles not at all (see ``PredictionConfig``).
+
+    Args:
+        road_users: the k road users.
+        speed: observed speeds [m/s], shape (k, 1).
+        tau: time of motion [s], shape (k, n_t) or (1, n_t).
+        t: prediction times [s], shape (1, n_t).
+        config: growth rates.
+
+    Returns:
+        (sigma_long, sigma_lat), each shape (k, n_t).
+    """
+    is_ped = np.array([u.type is RoadUserType.PEDESTRIAN for u in road_users])[:, None]
+    # A parked vehicle does not move: its uncertainty stays that of the observation.
+    moving = np.array([u.type is not RoadUserType.PARKED_VEHICLE for u in road_users])[:, None]
+    vehicle_rate = config.growth_long + config.growth_long_per_speed * np.abs(speed)
+    long_rate = np.where(is_ped, config.pedestrian_growth, vehicle_rate)
+    lat_rate = np.where(is_ped, config.pedestrian_growth, config.growth_lat)
+    sigma_long = config.sigma0_long + moving * long_rate * np.where(is_ped, t, tau)
+    sigma_lat = config.sigma0_lat + moving * lat_rate * t
+    return np.broadcast_to(sigma_long, (len(road_users), t.shape[-1])), sigma_lat
+
+
+def check_unique_ids(road_users: Sequence[RoadUser]) -> np.ndarray:
+    """The road users' ids, shape (k,); ValueError if two share an id."""
+    ids = np.array([u.id for u in road_users], dtype=int).reshape(len(road_users))
+    if len(set(ids.tolist())) != len(ids):
+        raise ValueError("road-user ids must be unique")
+    return ids
+
+
 def empty_prediction(n_t: int) -> Prediction:
     """A prediction of no road users over ``n_t`` steps."""
     empty = np.zeros((0, n_t))

@@ -1,7 +1,7 @@
-"""The constant-turn-rate predictor: the first implementation of ``Predictor``.
+"""The constant-turn-rate predictor: each road user keeps its observed speed and turn rate.
 
-Each road user keeps its observed speed and turn rate; the position covariance grows
-over the horizon (``PredictionConfig``). Registered as ``"constant_turn_rate"``.
+The position covariance grows over the horizon (``PredictionConfig``). Registered as
+``"constant_turn_rate"``; the default predictor is ``constant_acceleration``.
 """
 
 from __future__ import annotations
@@ -12,19 +12,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ethical_planner.config import PredictionConfig
-from ethical_planner.prediction.base import PREDICTORS, Prediction, empty_prediction
-from ethical_planner.road_users import RoadUser, RoadUserType
-
-
-def _rotated_covariance(sigma_long: np.ndarray, sigma_lat: np.ndarray, heading: np.ndarray) -> np.ndarray:
-    """Covariance [m^2] of stds along/across ``heading``; inputs broadcast, output (..., 2, 2)."""
-    c, s = np.cos(heading), np.sin(heading)
-    var_l, var_t = sigma_long**2, sigma_lat**2
-    cov = np.empty(np.broadcast(c, var_l).shape + (2, 2))
-    cov[..., 0, 0] = c * c * var_l + s * s * var_t
-    cov[..., 1, 1] = s * s * var_l + c * c * var_t
-    cov[..., 0, 1] = cov[..., 1, 0] = c * s * (var_l - var_t)
-    return cov
+from ethical_planner.prediction.base import (
+    PREDICTORS,
+    Prediction,
+    check_unique_ids,
+    empty_prediction,
+    growing_sigmas,
+    rotated_covariance,
+)
+from ethical_planner.road_users import RoadUser
 
 
 def predict_constant_turn_rate(
@@ -44,9 +40,7 @@ def predict_constant_turn_rate(
     n_obs, n_t = len(road_users), len(times)
     if n_obs == 0:
         return empty_prediction(n_t)
-    ids = np.array([u.id for u in road_users])
-    if len(set(ids.tolist())) != n_obs:
-        raise ValueError("road-user ids must be unique")
+    ids = check_unique_ids(road_users)
     x0, y0, yaw0, v0, omega = (
         np.array([getattr(u.state, name) for u in road_users])[:, None]
         for name in ("x", "y", "yaw", "v", "yaw_rate")
@@ -60,24 +54,12 @@ def predict_constant_turn_rate(
     # Constant turn rate arcs; straight lines where the turn rate vanishes.
     x = np.where(turning, x0 + v0 / safe_omega * (np.sin(heading) - np.sin(yaw0)), x0 + v0 * t * np.cos(yaw0))
     y = np.where(turning, y0 - v0 / safe_omega * (np.cos(heading) - np.cos(yaw0)), y0 + v0 * t * np.sin(yaw0))
-    is_ped = np.array([u.type is RoadUserType.PEDESTRIAN for u in road_users])[:, None]
-    # A parked vehicle does not move: its uncertainty stays that of the observation.
-    moving = np.array([u.type is not RoadUserType.PARKED_VEHICLE for u in road_users])[:, None]
-    sigma_long = (
-        config.sigma0_long
-        + moving
-        * np.where(
-            is_ped, config.pedestrian_growth, config.growth_long + config.growth_long_per_speed * np.abs(v0)
-        )
-        * t
-    )
-    sigma_lat = config.sigma0_lat + moving * np.where(is_ped, config.pedestrian_growth, config.growth_lat) * t
-    cov = _rotated_covariance(sigma_long, sigma_lat, heading)
+    sigma_long, sigma_lat = growing_sigmas(road_users, v0, t, t, config)
     prediction = Prediction(
         ids=ids,
         types=tuple(u.type for u in road_users),
         mean=np.stack([x, y], axis=-1),
-        cov=cov,
+        cov=rotated_covariance(sigma_long, sigma_lat, heading),
         heading=heading,
         speed=np.broadcast_to(np.abs(v0), (n_obs, n_t)).copy(),
         length=np.array([u.shape.length for u in road_users]),

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from dataclasses import dataclass
 
 import mujoco
@@ -34,12 +35,15 @@ class ObservationNoise:
 
     Attributes:
         position: [m]. velocity: along the heading [m/s]. yaw: [rad].
+        acceleration: along the heading [m/s^2]. yaw_rate: [rad/s].
         ego_position: noise on the ego's own localisation [m].
     """
 
     position: float = 0.0
     velocity: float = 0.0
     yaw: float = 0.0
+    acceleration: float = 0.0
+    yaw_rate: float = 0.0
     ego_position: float = 0.0
 
     def __post_init__(self) -> None:
@@ -48,13 +52,24 @@ class ObservationNoise:
             position=self.position,
             velocity=self.velocity,
             yaw=self.yaw,
+            acceleration=self.acceleration,
+            yaw_rate=self.yaw_rate,
             ego_position=self.ego_position,
         )
 
     @property
     def enabled(self) -> bool:
         """True if any standard deviation is positive."""
-        return max(self.position, self.velocity, self.yaw, self.ego_position) > 0
+        return (
+            max(self.position, self.velocity, self.yaw, self.acceleration, self.yaw_rate, self.ego_position)
+            > 0
+        )
+
+
+#: Window of the finite difference that measures accelerations [s].
+ACCELERATION_WINDOW = 0.1
+#: Velocities are kept at most this often for it [s].
+_HISTORY_INTERVAL = ACCELERATION_WINDOW / 10
 
 
 class World:
@@ -160,6 +175,8 @@ class World:
         self._history_count = 0
         self._steps = 0
         self._sample_history()
+        # Velocities at recent controller updates, for the measured accelerations.
+        self._velocity_history: deque[tuple[float, np.ndarray]] = deque(maxlen=64)
 
     # ------------------------------------------------------------------ setup
 
@@ -269,11 +286,13 @@ class World:
             rng: generator for the observation noise (needed if ``noise`` is enabled).
             noise: standard deviations; None observes exactly.
 
-        The ego's acceleration is the one its current plan commands; road users are
-        reported with a = 0. Hidden road users (sensor range, occlusion) are left out.
-        Each road user carries its ``history``: the world's samples of its true motion
-        every ``history_step`` (a tracker's smoothed estimate; the observation noise
-        applies to the current state only).
+        The ego's acceleration is the one its current plan commands. A road user's
+        acceleration is measured from the physics: the change of its velocity over the
+        last ``ACCELERATION_WINDOW`` seconds, projected on its heading; its yaw rate is
+        the physics' angular velocity. Hidden road users (sensor range, occlusion) are
+        left out. Each road user carries its ``history``: the world's samples of its true
+        motion every ``history_step`` (a tracker's smoothed estimate; the observation
+        noise applies to the current state only).
 
         Returns:
             (ego state, road users with ids = entity indices, shapes, masses and legal
@@ -283,6 +302,8 @@ class World:
         v_along = self.speeds_along_heading()
         x, y, yaw = qpos[:, 0].copy(), qpos[:, 1].copy(), qpos[:, 2].copy()
         v = v_along.copy()
+        accel = self.accelerations_along_heading()
+        yaw_rate = qvel[:, 2].copy()
         if noise is not None and noise.enabled:
             if rng is None:
                 raise ValueError("observe: observation noise needs a numpy Generator (rng)")
@@ -292,6 +313,9 @@ class World:
             y += rng.normal(0.0, 1.0, self.n) * sigma_p
             yaw[1:] += rng.normal(0.0, noise.yaw, self.n - 1)
             v[1:] += rng.normal(0.0, noise.velocity, self.n - 1)
+            if noise.acceleration > 0 or noise.yaw_rate > 0:
+                accel[1:] += rng.normal(0.0, noise.acceleration, self.n - 1)
+                yaw_rate[1:] += rng.normal(0.0, noise.yaw_rate, self.n - 1)
         t = self.time
         visible = self.visible()
         a_plan = float(self.ego_plan.sample(t)[2] @ np.array([math.cos(yaw[0]), math.sin(yaw[0])]))
@@ -305,7 +329,7 @@ class World:
                 id=i,
                 type=self.types[i],
                 state=KinematicState(
-                    float(x[i]), float(y[i]), float(yaw[i]), float(v[i]), 0.0, float(qvel[i, 2])
+                    float(x[i]), float(y[i]), float(yaw[i]), float(v[i]), float(accel[i]), float(yaw_rate[i])
                 ),
                 shape=Shape(float(self.lengths[i]), float(self.widths[i])),
                 mass=float(self.scene.masses[i]),
@@ -316,6 +340,26 @@ class World:
             if visible[i]
         ]
         return ego_state, users
+
+    def accelerations_along_heading(self) -> np.ndarray:
+        """(n,) accelerations along each body's heading [m/s^2], by finite differences.
+
+        The velocity change since the controller update closest to
+        ``ACCELERATION_WINDOW`` seconds ago, divided by the time between; 0 before
+        the first update.
+        """
+        history = self._velocity_history
+        now = self.time
+        if not history:
+            return np.zeros(self.n)
+        times = np.fromiter((entry[0] for entry in history), float, len(history))
+        k = int(np.argmin(np.abs(times - (now - ACCELERATION_WINDOW))))
+        then, velocity = history[k]
+        if now - then < 0.25 * ACCELERATION_WINDOW:
+            return np.zeros(self.n)
+        dv = (self.scene.qvel[:, :2] - velocity) / (now - then)
+        yaw = self.scene.qpos[:, 2]
+        return dv[:, 0] * np.cos(yaw) + dv[:, 1] * np.sin(yaw)
 
     def visible(self) -> np.ndarray:
         """(n,) bool: which bodies the ego perceives (entity 0, the ego, is always True).
@@ -347,6 +391,9 @@ class World:
     def _update_controls(self, t: float) -> None:
         """Behaviours and controllers of all bodies at time ``t`` [s] (one vectorised call)."""
         scene, fleet = self.scene, self.fleet
+        history = self._velocity_history
+        if not history or t - history[-1][0] >= _HISTORY_INTERVAL - 1e-9:
+            history.append((t, scene.qvel[:, :2].copy()))
         if fleet.k and fleet.due(t):
             fleet.decide(self.view())
         p_ref, v_ref, a_ref = self._p_ref, self._v_ref, self._a_ref

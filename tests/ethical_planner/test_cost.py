@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from ethical_planner.config import CostWeights
-from ethical_planner.cost import bayes, equality, maximin, responsibility, total_cost
+from ethical_planner.cost import bayes, equality, maximin, responsibility, risk_set, total_cost
 from ethical_planner.validity import Validity
 
 risk_rows = arrays(np.float64, st.tuples(st.integers(1, 4), st.integers(0, 9)), elements=st.floats(0, 1))
@@ -60,6 +60,7 @@ def test_total_cost_uses_eq5_for_valid_and_eq6_otherwise():
     zeros = np.zeros((2, 1))
     costs = total_cost(
         risks,
+        np.ones((2, 1), dtype=bool),
         zeros,
         zeros,
         zeros.astype(bool),
@@ -80,3 +81,60 @@ def test_empty_risk_set_costs_nothing():
     empty = np.zeros((3, 0))
     assert np.all(bayes(empty) == 0) and np.all(equality(empty) == 0)
     assert np.all(maximin(empty, empty.astype(bool), 10.0) == 0)
+
+
+@settings(max_examples=100, deadline=None)
+@given(risk_rows, st.data())
+def test_masked_principles_use_only_the_entries_present(risks, data):
+    present = data.draw(arrays(np.bool_, risks.shape))
+    rows = list(zip(risks, present, strict=True))
+    expected_e = [_equality_scalar(list(row[keep])) for row, keep in rows]
+    expected_b = [float(np.mean(row[keep])) if keep.any() else 0.0 for row, keep in rows]
+    np.testing.assert_allclose(equality(risks, present), expected_e, atol=1e-12)
+    np.testing.assert_allclose(bayes(risks, present), expected_b, atol=1e-15)
+
+
+def test_risk_set_is_the_papers_2k_entries_on_the_road():
+    """Issue 9's example: one road user, candidates A (R_1, R_ego,1) = (0.010, 0.010) and
+    B = (0.009, 0.000), both on the road, w_B = w_E = 1.
+
+    By hand (Eqs. 8, 9 with |S_R| = 2): A: J_B = 0.010, J_E = 0 -> 0.010;
+    B: J_B = 0.0045, J_E = 0.009 -> 0.0135. The paper prefers A. With an extra entry of
+    0 for the road edge (|S_R| = 3) J_B + J_E would be A: 0.0133, B: 0.0090, the other
+    way round.
+    """
+    risk_obs = np.array([[0.010], [0.009]])
+    risk_ego = np.array([[0.010], [0.000]])
+    on_road = np.zeros(2, dtype=bool)
+    risks, present = risk_set(risk_obs, risk_ego, np.zeros(2), on_road)
+    assert present.sum(axis=1).tolist() == [2, 2]
+    np.testing.assert_allclose(bayes(risks, present), [0.010, 0.0045])
+    np.testing.assert_allclose(equality(risks, present), [0.0, 0.009])
+    weights = CostWeights(risk=1.0, bayes=1.0, equality=1.0, maximin=0.0, jerk_lon=0, jerk_lat=0, speed=0)
+    costs = total_cost(
+        risks,
+        present,
+        np.zeros_like(risks),
+        np.zeros_like(risks),
+        np.zeros(risks.shape, dtype=bool),
+        np.zeros(2),
+        np.zeros(2),
+        np.zeros(2),
+        np.zeros(2),
+        np.zeros(2),
+        np.full(2, int(Validity.VALID)),
+        weights,
+    )
+    np.testing.assert_allclose(costs.risk, [0.010, 0.0135])
+    assert costs.total[0] < costs.total[1]
+    # The old set, every entry present (a road-edge risk of 0 counted): the preference flips.
+    flipped = bayes(risks) + equality(risks)
+    np.testing.assert_allclose(flipped, [0.02 / 3 + 0.02 / 3, 0.009 / 3 + 0.018 / 3])
+    assert flipped[0] > flipped[1]
+
+
+def test_leaving_the_road_adds_the_egos_road_edge_risk_to_its_set():
+    risks, present = risk_set(np.array([[0.0]]), np.array([[0.0]]), np.array([0.06]), np.array([True]))
+    assert present.sum() == 3
+    assert bayes(risks, present)[0] == pytest.approx(0.02)
+    assert equality(risks, present)[0] == pytest.approx((0.0 + 0.06 + 0.06) / 3)

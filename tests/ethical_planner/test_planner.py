@@ -173,3 +173,39 @@ def test_missing_calibration_file_is_a_clear_error(tmp_path):
     config = preset("ethical").with_overrides({"risk": {"delta_v_correction": str(tmp_path / "nope.json")}})
     with pytest.raises(ValueError, match="risk.delta_v_correction: cannot read"):
         Planner(config, overtaking_cyclist().environment)
+
+
+def test_principles_of_the_chosen_plan_use_the_papers_risk_set():
+    """J_B and J_E of the decision recomputed by hand from its per-road-user risks:
+    S_R = {R_k} + {R_ego,k}, 2k entries for a plan on the road (no road-edge entry)."""
+    import itertools
+
+    situation = oncoming_in_ego_lane_with_pedestrian()
+    decision = Planner(preset("ethical"), situation.environment).plan(situation.ego, situation.road_users)
+    assert decision.boundary_risk == 0.0
+    values = [u.risk for u in decision.road_users] + [u.ego_risk for u in decision.road_users]
+    assert len(values) == 6 and max(values) > 0
+    pairs = list(itertools.combinations(values, 2))
+    assert decision.costs["bayes"] == pytest.approx(sum(values) / 6, rel=1e-12)
+    assert decision.costs["equality"] == pytest.approx(sum(abs(a - b) for a, b in pairs) / 15, rel=1e-12)
+
+
+def test_a_user_predictor_is_used_by_the_planner():
+    from ethical_planner.prediction import predict_constant_turn_rate
+
+    calls = []
+
+    class Recording:
+        name = "recording"
+
+        def predict(self, road_users, times):
+            calls.append(len(times))
+            return predict_constant_turn_rate(road_users, times, preset("ethical").prediction)
+
+    situation = overtaking_cyclist()
+    Planner(preset("ethical"), situation.environment, predictor=Recording()).plan(
+        situation.ego, situation.road_users
+    )
+    assert calls == [int(round(max(preset("ethical").sampling.horizons) / 0.1)) + 1]
+    with pytest.raises(ValueError, match="Predictor protocol"):
+        Planner(preset("ethical"), situation.environment, predictor=object())

@@ -82,3 +82,124 @@ def test_parked_vehicles_keep_their_initial_uncertainty():
         [parked], np.linspace(0, 3, 31), PredictionConfig(covariance_floor=1e-6)
     )
     np.testing.assert_allclose(pred.cov[0, -1], pred.cov[0, 0])
+
+
+# ----------------------------------------------------------------- constant acceleration
+
+
+def _ode_reference(state, times, config):
+    """Independent solution of the predictor's motion law with scipy's ODE solver.
+
+    u' = a (braking, until u = 0) or a exp(-t / T_a) (a >= 0); theta' = omega exp(-t / T_w)
+    while moving; p' = u (cos theta, sin theta).
+    """
+    from scipy.integrate import solve_ivp
+
+    t_a, t_w = config.acceleration_time_constant, config.turn_rate_time_constant
+
+    def rhs(t, z):
+        x, y, theta, u = z
+        moving = u > 1e-12
+        du = (state.a if state.a < 0 else state.a * math.exp(-t / t_a)) if (moving or state.a > 0) else 0.0
+        dtheta = state.yaw_rate * math.exp(-t / t_w) if moving else 0.0
+        return [u * math.cos(theta), u * math.sin(theta), dtheta, du]
+
+    stop = (lambda t, z: z[3]) if state.a < 0 else None
+    if stop is not None:
+        stop.terminal = True
+        stop.direction = -1
+    sol = solve_ivp(
+        rhs,
+        (0.0, times[-1]),
+        [state.x, state.y, state.yaw, state.v],
+        t_eval=times,
+        events=stop,
+        rtol=1e-10,
+        atol=1e-10,
+        max_step=0.01,
+    )
+    out = np.empty((len(times), 4))
+    out[: sol.y.shape[1]] = sol.y.T
+    if sol.y.shape[1] < len(times):  # stopped: stays where it stopped
+        x_stop, y_stop, th_stop, _ = sol.y_events[0][0]
+        out[sol.y.shape[1] :] = [x_stop, y_stop, th_stop, 0.0]
+    return out
+
+
+@pytest.mark.parametrize(
+    "state",
+    [
+        KinematicState(0, 0, 0.3, 15.0, a=-7.5, yaw_rate=0.0),
+        KinematicState(5, -2, 1.0, 12.0, a=-4.0, yaw_rate=0.4),
+        KinematicState(0, 0, 0.0, 8.0, a=2.0, yaw_rate=-0.3),
+        KinematicState(0, 0, 2.0, 0.0, a=1.5, yaw_rate=0.2),
+    ],
+)
+def test_constant_acceleration_means_match_an_ode_solver(state):
+    from ethical_planner.prediction import predict_constant_acceleration
+
+    times = np.linspace(0, 3, 31)
+    config = PredictionConfig()
+    pred = predict_constant_acceleration([_car(state)], times, config)
+    ref = _ode_reference(state, times, config)
+    np.testing.assert_allclose(pred.mean[0], ref[:, :2], atol=2e-3)
+    np.testing.assert_allclose(pred.heading[0], ref[:, 2], atol=1e-6)
+    np.testing.assert_allclose(pred.speed[0], ref[:, 3], atol=1e-6)
+
+
+def test_braking_road_user_stops_and_never_reverses():
+    """A lead braking at 7.5 m/s^2 from 15 m/s stops after 15 m (v^2 / 2a), not 45 m at 3 s."""
+    from ethical_planner.prediction import predict_constant_acceleration
+
+    times = np.linspace(0, 3, 31)
+    lead = _car(KinematicState(0, 0, 0, 15.0, a=-7.5))
+    pred = predict_constant_acceleration([lead], times, PredictionConfig())
+    x = pred.mean[0, :, 0]
+    expected = np.where(times < 2.0, 15 * times - 3.75 * times**2, 15.0)
+    np.testing.assert_allclose(x, expected, atol=2e-3)
+    assert np.all(np.diff(x) >= -1e-12) and np.all(pred.speed[0] >= 0)
+    np.testing.assert_allclose(pred.speed[0, times >= 2.0], 0.0)
+    # The constant-turn-rate model keeps 15 m/s: 45 m at 3 s.
+    assert predict_constant_turn_rate([lead], times, PredictionConfig()).mean[0, -1, 0] == pytest.approx(45)
+
+
+def test_turn_rate_decays_so_a_swerve_is_not_a_circle():
+    from ethical_planner.prediction import predict_constant_acceleration
+
+    times = np.linspace(0, 3, 31)
+    config = PredictionConfig()
+    swerving = _car(KinematicState(0, 0, 0, 15.0, yaw_rate=0.3))
+    decayed = predict_constant_acceleration([swerving], times, config)
+    circle = predict_constant_turn_rate([swerving], times, config)
+    # Total heading change is omega T_w (1 - exp(-t / T_w)) <= omega T_w = 0.24 rad.
+    limit = 0.3 * config.turn_rate_time_constant
+    np.testing.assert_allclose(decayed.heading[0, -1], limit * (1 - math.exp(-3 / 0.8)))
+    assert circle.heading[0, -1] == pytest.approx(0.9)
+    assert decayed.mean[0, -1, 1] < 0.5 * circle.mean[0, -1, 1]
+
+
+def test_acceleration_uncertainty_widens_the_longitudinal_spread():
+    from ethical_planner.prediction import predict_constant_acceleration
+
+    times = np.linspace(0, 3, 31)
+    config = PredictionConfig(covariance_floor=1e-9)
+    braking = predict_constant_acceleration([_car(KinematicState(0, 0, 0, 15.0, a=-5.0))], times, config)
+    steady = predict_constant_acceleration([_car(KinematicState(0, 0, 0, 15.0))], times, config)
+    sigma_a = config.acceleration_sigma + config.acceleration_sigma_per_observed * 5.0
+    tau = np.minimum(times, 3.0)  # stops at 3 s
+    sigma_long = config.sigma0_long + (config.growth_long + config.growth_long_per_speed * 15) * tau
+    np.testing.assert_allclose(np.sqrt(braking.cov[0, :, 0, 0]), sigma_long + 0.5 * sigma_a * tau**2)
+    steady_sigma = sigma_long + 0.5 * config.acceleration_sigma * times**2
+    np.testing.assert_allclose(np.sqrt(steady.cov[0, :, 0, 0]), steady_sigma)
+    # A stopped road user's spread stops growing when it stops.
+    stopping = predict_constant_acceleration([_car(KinematicState(0, 0, 0, 6.0, a=-6.0))], times, config)
+    np.testing.assert_allclose(stopping.cov[0, 10:, 0, 0], stopping.cov[0, 10, 0, 0])
+
+
+def test_the_default_predictor_is_constant_acceleration_and_both_are_registered():
+    from ethical_planner.prediction import PREDICTORS, make_predictor
+
+    assert make_predictor(PredictionConfig()).name == "constant_acceleration"
+    assert {"constant_acceleration", "constant_turn_rate"} <= set(PREDICTORS.names())
+    with pytest.raises(ValueError, match="turn_rate_time_constant"):
+        PredictionConfig(turn_rate_time_constant=0.0)

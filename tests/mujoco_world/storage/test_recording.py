@@ -55,8 +55,10 @@ class StateCopy(RunObserver):
 
 @pytest.fixture(scope="module")
 def crash_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("runs") / "tailgater-run"
-    scenario = dataclasses.replace(get_scenario("tailgater_sudden_stop"), duration=6.0)
+    # The truck hits the cyclist at 4.9 s whatever the ego does: an impact that does not
+    # depend on the planner's competence.
+    out = tmp_path_factory.mktemp("runs") / "turning-truck-run"
+    scenario = dataclasses.replace(get_scenario("turning_truck_cyclist"), duration=6.0)
     recorder = RerunRecorder(out, RecorderConfig(frame_rate=20.0, candidates=50))
     copy = StateCopy(50)  # 20 Hz at dt = 1 ms, the recorder's interval
     summary = run_scenario(scenario, "ethical", 0, observer=ObserverGroup([recorder, copy]))

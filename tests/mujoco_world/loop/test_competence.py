@@ -1,0 +1,76 @@
+"""Scenario-level regressions of the planner's competence (issue 9, causes 1-6).
+
+Each test puts the planner (or its predictor) into a situation of the catalog, in the
+MuJoCo world, where the old planner failed, and checks the behaviour that avoids the
+failure. They are short: a few seconds of world time or a few planning cycles.
+"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from ethical_planner.config import PredictionConfig
+from ethical_planner.prediction import predict_constant_acceleration, predict_constant_turn_rate
+from mujoco_world.loop.world import World
+from mujoco_world.scenario.catalog import get_scenario
+
+
+def _advance(world, seconds):
+    for _ in range(int(round(seconds / world.scene.dt))):
+        world.step()
+
+
+def test_cause_3_a_braking_lead_is_predicted_to_stop_where_it_stops():
+    """tailgater_sudden_stop: the lead brakes at 7.5 m/s^2 from 15 m/s.
+
+    The world reports the measured acceleration, and the default predictor puts the
+    stopped lead within 0.5 m of where it actually stops; the constant-velocity model
+    put it ~10 m further.
+    """
+    scenario = get_scenario("tailgater_sudden_stop")
+    lead = scenario.road_users[0]
+    # The ego stands far behind, so nothing hits the lead: only its braking is watched.
+    scenario = dataclasses.replace(
+        scenario, road_users=(lead,), ego=dataclasses.replace(scenario.ego, s0=2.0, speed=0.0)
+    )
+    world = World(scenario)
+    _advance(world, lead.behaviour.start_time + 0.3)
+    _, users = world.observe()
+    (observed,) = users
+    assert observed.state.a == pytest.approx(-7.5, abs=0.3)
+    times = np.linspace(0.0, 3.0, 31)
+    predicted = predict_constant_acceleration(users, times, PredictionConfig()).mean[0, -1, 0]
+    blind = predict_constant_turn_rate(users, times, PredictionConfig()).mean[0, -1, 0]
+    _advance(world, 3.0)
+    actual = world.positions[1, 0]
+    assert abs(world.speeds_along_heading()[1]) < 0.1  # it has stopped
+    assert predicted == pytest.approx(actual, abs=0.5)
+    assert blind - actual > 5.0
+
+
+def test_cause_3_a_drift_is_not_extrapolated_to_the_kerb():
+    """oncoming_drift: early in the drift (turn rate near its peak), the decayed turn
+    rate predicts the drifter's lateral position 2 s ahead far better than the constant
+    turn rate, which drives it on a circle through the ego lane to the kerb."""
+    scenario = get_scenario("oncoming_drift")
+    drifter = scenario.road_users[0]
+    scenario = dataclasses.replace(
+        scenario, road_users=(drifter,), ego=dataclasses.replace(scenario.ego, s0=2.0, speed=0.0)
+    )
+    world = World(scenario)
+    # Run until the drifter has moved 0.5 m sideways, then predict 2 s ahead.
+    y_start = world.positions[1, 1]
+    while abs(world.positions[1, 1] - y_start) < 0.5:
+        _advance(world, 0.05)
+    _, users = world.observe()
+    assert abs(users[0].state.yaw_rate) > 0.05
+    times = np.linspace(0.0, 2.0, 21)
+    decayed = predict_constant_acceleration(users, times, PredictionConfig()).mean[0, -1, 1]
+    circle = predict_constant_turn_rate(users, times, PredictionConfig()).mean[0, -1, 1]
+    _advance(world, 2.0)
+    actual = world.positions[1, 1]
+    # Measured: the circle ends 5.2 m beyond the drifter's final offset (past the ego
+    # lane, at the kerb); the decayed turn rate 2.8 m (heading extrapolation without a
+    # map cannot know that the drifter straightens out).
+    assert abs(decayed - actual) < abs(circle - actual) - 2.0
