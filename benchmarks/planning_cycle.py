@@ -17,7 +17,7 @@ import numpy as np
 from ethical_planner.config import PlannerConfig, preset
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.planner import Planner
-from ethical_planner.prediction import predict_constant_turn_rate
+from ethical_planner.prediction import make_predictor
 from ethical_planner.road_users import DEFAULT_SHAPES, KinematicState, RoadUser, RoadUserType
 
 #: (n_speeds, n_offsets, horizon [s]) of the two standard grids.
@@ -124,7 +124,8 @@ def peer_obstacles(grid: str, n_road_users: int) -> list[dict]:
     config = grid_config(grid)
     dt = config.sampling.dt
     times = np.arange(int(round(max(config.sampling.horizons) / dt)) + 1) * dt
-    pred = predict_constant_turn_rate(scene.road_users, times, config.prediction)
+    pred = make_predictor(config.prediction).predict(scene.road_users, times)
+    pred = pred.with_covariance_floor(config.prediction.covariance_floor)  # as the planner does
     return [
         {
             "mean": pred.mean[k],

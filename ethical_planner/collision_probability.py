@@ -28,9 +28,9 @@ than the gate radius from the mean are dropped (each below 7.6e-9, ``_FAR_MIN``)
 With 16 terms per octagon, p is within 1e-6 of the closed form; measured against
 the exact evaluation over 2.5 million triples, the largest difference was 5e-8.
 The work runs in chunks on reused scratch buffers (no allocation in the loop) and,
-for large inputs, on two threads (``ETHICAL_PLANNER_THREADS``, default
-min(2, CPU count), 1 inside a worker process); results do not depend on the
-number of threads.
+for large inputs, on the threads of the caller's ``ethical_planner.workers.Workers``
+(``ETHICAL_PLANNER_THREADS``, default min(2, CPU count), 1 inside a worker process);
+results do not depend on the number of threads.
 
 Everything is a pure function over struct-of-arrays inputs; nothing is mutated.
 """
@@ -38,24 +38,16 @@ Everything is a pure function over struct-of-arrays inputs; nothing is mutated.
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
-import threading
-from collections.abc import Callable, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import ndtr, owens_t
 
 from ethical_planner.validation import check_shape, shaped_array
+from ethical_planner.workers import Scratch, Workers
 
 __all__ = ["CollisionProbability", "collision_probability", "polygon_gaussian_mass"]
-
-_T = TypeVar("_T")
-_J = TypeVar("_J")
 
 #: An origin closer than this (whitened units) to an edge's line is "on" that line:
 #: the edge's triangle (origin, a, b) then has mass below 0.4 * 1e-12 and counts 0.
@@ -136,6 +128,7 @@ def collision_probability(
     obs_length: ArrayLike,
     obs_width: ArrayLike,
     gate_sigmas: float = 6.0,
+    workers: Workers | None = None,
 ) -> CollisionProbability:
     """Probability that the ego footprint overlaps each road user's footprint.
 
@@ -158,6 +151,9 @@ def collision_probability(
             deviations (along the covariance's major axis) apart get p = 0 without an
             integral; the mass cut off is below Phi(-gate_sigmas) (1e-9 at 6).
             ``math.inf`` disables the gate.
+        workers: helper threads and scratch buffers; large inputs (from
+            ``_PARALLEL_MIN`` triples) use its threads. None makes a fresh one for this
+            call (threads from ``ETHICAL_PLANNER_THREADS``); pass one to reuse buffers.
 
     Returns:
         Probabilities and mean-position overlaps, both of shape (n_traj, n_obs, n_t).
@@ -253,19 +249,22 @@ def collision_probability(
     problem = _Problem(n_traj, n_obs, n_t, obs_rows, ego_rows, degenerate, far)
     # Blocks of trajectories: small enough for the cache, at least two per thread so that
     # the threads finish together.
-    threads = _threads() if probability.size >= _PARALLEL_MIN else 1
+    workers = Workers() if workers is None else workers
+    threads = workers.threads if probability.size >= _PARALLEL_MIN else 1
     chunk, gate_block = (_CHUNK, _GATE_BLOCK) if threads == 1 else (_CHUNK_THREADED, _GATE_BLOCK_THREADED)
     block = max(1, min(gate_block // (n_obs * n_t), -(-n_traj // (2 * threads))))
     jobs = [(start, min(start + block, n_traj)) for start in range(0, n_traj, block)]
 
     def run(job: tuple[int, int]) -> None:
         start, stop = job
-        _gate_and_integrate(problem, start, stop, chunk, probability[start:stop], mean_overlap[start:stop])
+        _gate_and_integrate(
+            problem, start, stop, chunk, probability[start:stop], mean_overlap[start:stop], workers.scratch
+        )
 
     # Each block writes its own rows of the outputs, so the result does not depend on
     # which thread runs which block.
     if threads > 1:
-        _parallel_for(jobs, run)
+        workers.parallel_for(jobs, run)
     else:
         for job in jobs:
             run(job)
@@ -454,113 +453,6 @@ class _Problem:
     far: float
 
 
-class _Scratch(threading.local):
-    """Per-thread scratch buffers, reused across calls (about 10 MB, 40 MB when threaded).
-
-    Temporaries of a few hundred kB are slow to allocate: glibc returns them to the
-    kernel on free and every new one page-faults (up to 10x the cost of the arithmetic
-    on the VMs measured). The kernels below write into these buffers instead.
-    """
-
-    def __init__(self) -> None:
-        self.buffers: dict[tuple[str, type], np.ndarray] = {}
-        self.views: dict[tuple[str, tuple[int, ...], type], np.ndarray] = {}
-
-    def get(self, name: str, shape: tuple[int, ...], dtype: type = np.float64) -> np.ndarray:
-        """Return a C-contiguous scratch array of ``shape``; its contents are undefined."""
-        key = (name, shape, dtype)
-        view = self.views.get(key)
-        if view is None:
-            size = math.prod(shape)
-            buffer = self.buffers.get((name, dtype))
-            if buffer is None or buffer.size < size:
-                # Grow with headroom; views of the old buffer are dropped with it.
-                buffer = np.empty(max(size + size // 4, 1), dtype=dtype)
-                self.buffers[(name, dtype)] = buffer
-                self.views = {k: v for k, v in self.views.items() if k[0] != name or k[2] != dtype}
-            if len(self.views) > 4096:
-                self.views.clear()
-            view = buffer[:size].reshape(shape)
-            self.views[key] = view
-        return view
-
-
-_SCRATCH = _Scratch()
-_POOL: tuple[int, ThreadPoolExecutor] | None = None
-_POOL_LOCK = threading.Lock()
-
-
-def _threads() -> int:
-    """Threads for large inputs: ETHICAL_PLANNER_THREADS, else min(2, CPU count).
-
-    Inside a worker process (a batch of scenarios on a process pool) the default is 1:
-    the cores are already busy with the other workers.
-    """
-    value = os.environ.get("ETHICAL_PLANNER_THREADS")
-    if value:
-        try:
-            return max(1, int(value))
-        except ValueError:
-            raise ValueError(f"ETHICAL_PLANNER_THREADS must be a positive integer, got {value!r}") from None
-    if multiprocessing.parent_process() is not None:
-        return 1
-    return min(2, os.cpu_count() or 1)
-
-
-def _executor() -> ThreadPoolExecutor | None:
-    """The shared helper pool (threads - 1 workers), created on first use; None for 1 thread."""
-    global _POOL
-    workers = _threads() - 1
-    if workers < 1:
-        return None
-    with _POOL_LOCK:
-        if _POOL is None or _POOL[0] != workers:
-            if _POOL is not None:
-                _POOL[1].shutdown(wait=False)
-            _POOL = (workers, ThreadPoolExecutor(workers, thread_name_prefix="ethical-planner"))
-        return _POOL[1]
-
-
-def _submit(function: Callable[[], _T]) -> Future[_T] | None:
-    """Run ``function`` on a helper thread; None (run it yourself) without helpers."""
-    pool = _executor()
-    return None if pool is None else pool.submit(function)
-
-
-def _parallel_for(jobs: Sequence[_J], run: Callable[[_J], None]) -> None:
-    """Run ``run(job)`` for every job on the calling thread and the helper threads.
-
-    Jobs are handed out one at a time from a shared iterator, so a helper that is busy
-    with something else (see ``_submit``) simply takes fewer. ``run`` must write its
-    results to places no other job touches; the result then does not depend on the
-    assignment of jobs to threads. numpy releases the GIL inside its loops, which is
-    where the time goes.
-    """
-    pool = _executor()
-    if pool is None or len(jobs) < 2:
-        for job in jobs:
-            run(job)
-        return
-    lock = threading.Lock()
-    remaining = iter(jobs)
-
-    def worker() -> None:
-        while True:
-            with lock:
-                job = next(remaining, None)
-            if job is None:
-                return
-            run(job)
-
-    helpers = [pool.submit(worker) for _ in range(_threads() - 1)]
-    worker()
-    for helper in helpers:
-        # A helper that has not started (its thread still busy elsewhere) has nothing
-        # left to do; one that has started finishes the job it holds.
-        if not helper.cancel():
-            helper.result()
-
-
 def _gate_and_integrate(
     problem: _Problem,
     start: int,
@@ -568,6 +460,7 @@ def _gate_and_integrate(
     chunk: int,
     probability: np.ndarray,
     mean_overlap: np.ndarray,
+    scratch: Scratch,
 ) -> None:
     """Gate trajectories ``start:stop`` against every (obs, t) and integrate the survivors.
 
@@ -578,6 +471,7 @@ def _gate_and_integrate(
         chunk: survivors per kernel call.
         probability: output rows ``start:stop``, shape (stop - start, n_obs, n_t), written.
         mean_overlap: output rows, same shape, written.
+        scratch: the calling thread's scratch buffers.
 
     """
     n_obs, n_t = problem.n_obs, problem.n_t
@@ -586,14 +480,14 @@ def _gate_and_integrate(
     # Squared centre distance of every triple of the block, compared with reach^2.
     ex = ego[0, start * n_t : stop * n_t].reshape(b, 1, n_t)
     ey = ego[1, start * n_t : stop * n_t].reshape(b, 1, n_t)
-    dx = _SCRATCH.get("gate_dx", (b, n_obs, n_t))
-    dy = _SCRATCH.get("gate_dy", (b, n_obs, n_t))
+    dx = scratch.get("gate_dx", (b, n_obs, n_t))
+    dy = scratch.get("gate_dy", (b, n_obs, n_t))
     np.subtract(ex, obs[_O_MX].reshape(n_obs, n_t), out=dx)
     np.subtract(ey, obs[_O_MY].reshape(n_obs, n_t), out=dy)
     dx *= dx
     dy *= dy
     dx += dy
-    keep = _SCRATCH.get("gate_keep", (b, n_obs, n_t), np.bool_)
+    keep = scratch.get("gate_keep", (b, n_obs, n_t), np.bool_)
     # reach^2 is inf without a gate, which keeps every triple.
     np.less_equal(dx, obs[_O_REACH2].reshape(n_obs, n_t), out=keep)
     survivors = np.flatnonzero(keep)
@@ -606,21 +500,23 @@ def _gate_and_integrate(
         flat = survivors[first : first + chunk]
         m = flat.size
         # Flat triple index (traj, obs, t) -> (obs, t) and (traj, t) row indices.
-        o = _SCRATCH.get("idx_o", (m,), np.intp)
-        e = _SCRATCH.get("idx_e", (m,), np.intp)
-        step = _SCRATCH.get("idx_t", (m,), np.intp)
+        o = scratch.get("idx_o", (m,), np.intp)
+        e = scratch.get("idx_e", (m,), np.intp)
+        step = scratch.get("idx_t", (m,), np.intp)
         np.remainder(flat, n_t, out=step)
         np.remainder(flat, per_traj, out=o)
         np.floor_divide(flat, per_traj, out=e)
         e *= n_t
         e += step
         e += start * n_t
-        mass, inside = _octagon_mass(problem, o, e)
+        mass, inside = _octagon_mass(problem, o, e, scratch)
         p_flat[flat] = mass
         overlap_flat[flat] = inside
 
 
-def _octagon_mass(problem: _Problem, o: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _octagon_mass(
+    problem: _Problem, o: np.ndarray, e: np.ndarray, scratch: Scratch
+) -> tuple[np.ndarray, np.ndarray]:
     """Gaussian mass of the Minkowski octagons of ``m`` surviving triples.
 
     Args:
@@ -633,9 +529,9 @@ def _octagon_mass(problem: _Problem, o: np.ndarray, e: np.ndarray) -> tuple[np.n
         views into scratch buffers, valid until the next call on this thread.
 
     """
-    h, t1, t2 = _octagon_edges(problem, o, e)
+    h, t1, t2 = _octagon_edges(problem, o, e, scratch)
     m = o.size
-    get = _SCRATCH.get
+    get = scratch.get
     # The mean lies in the closed octagon (touching counts) when it is on the inner side
     # of every edge line, and strictly inside (winding number 1) when strictly so.
     lowest = get("lowest_h", (m,))
@@ -674,7 +570,7 @@ def _octagon_mass(problem: _Problem, o: np.ndarray, e: np.ndarray) -> tuple[np.n
         h.take(where, out=hs)
         t1.take(where, out=ts[0])
         t2.take(where, out=ts[1])
-        terms = _edge_terms(hs, ts, problem.far)
+        terms = _edge_terms(hs, ts, problem.far, scratch)
         np.remainder(where, m, out=where)  # flat (edge, triple) -> triple
         np.subtract(winding, np.bincount(where, weights=terms, minlength=m), out=mass)
     else:
@@ -684,7 +580,7 @@ def _octagon_mass(problem: _Problem, o: np.ndarray, e: np.ndarray) -> tuple[np.n
 
 
 def _octagon_edges(
-    problem: _Problem, o: np.ndarray, e: np.ndarray
+    problem: _Problem, o: np.ndarray, e: np.ndarray, scratch: Scratch
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Whitened edges of the Minkowski octagons, as distances and spans from the origin.
 
@@ -711,7 +607,7 @@ def _octagon_edges(
 
     """
     m = o.size
-    get = _SCRATCH.get
+    get = scratch.get
     obs, ego = problem.obs_rows, problem.ego_rows
     p = get("obs_mean_w", (5, m))  # mean x, y and w11, w21, w22
     np.take(obs[:5], o, axis=1, out=p)
@@ -819,7 +715,7 @@ def _octagon_edges(
     return h, t1, t2
 
 
-def _edge_terms(h: np.ndarray, t: np.ndarray, far: float) -> np.ndarray:
+def _edge_terms(h: np.ndarray, t: np.ndarray, far: float, scratch: Scratch) -> np.ndarray:
     """sign(h) [E(|h|, t2) - E(|h|, t1)] of edges with _H_TOL <= |h| < far.
 
     E(h, t) = T(h, t / h) is the standard normal mass of {X > h, 0 < Y < t X / h}
@@ -837,13 +733,13 @@ def _edge_terms(h: np.ndarray, t: np.ndarray, far: float) -> np.ndarray:
 
     """
     n = h.size
-    get = _SCRATCH.get
+    get = scratch.get
     # x rows: |h|, then |t1|, |t2| clamped; their upper normal tails in one call.
     x = get("tail_x", (3, n))
     np.abs(h, out=x[0])
     np.abs(t, out=x[1:])
     np.minimum(x[1:], far, out=x[1:])
-    tail = _upper_tail(x)
+    tail = _upper_tail(x, scratch)
     ah, at = x[0], x[1:]
     big = get("owens_h", (2, n), _OWENS_DTYPE)
     small = get("owens_a", (2, n), _OWENS_DTYPE)
@@ -851,7 +747,7 @@ def _edge_terms(h: np.ndarray, t: np.ndarray, far: float) -> np.ndarray:
     np.minimum(at, ah, out=small, casting="same_kind")
     small /= big
     owens = get("owens", (2, n))
-    owens[...] = _owens_t_unit(big, small)
+    owens[...] = _owens_t_unit(big, small, scratch)
     # Reflected value Q(h) / 2 + Q(t) (1/2 - Q(h)) - T(t, h / t) where |t| > |h|.
     reflected = get("reflected", (2, n))
     half_minus = get("half_minus", (n,))
@@ -870,7 +766,7 @@ def _edge_terms(h: np.ndarray, t: np.ndarray, far: float) -> np.ndarray:
     return terms
 
 
-def _owens_t_unit(h: np.ndarray, a: np.ndarray) -> np.ndarray:
+def _owens_t_unit(h: np.ndarray, a: np.ndarray, scratch: Scratch) -> np.ndarray:
     """Owen's T(h, a) for h >= 0 and 0 <= a <= 1 (see _GL_S2), in the dtype of ``h``.
 
     Args:
@@ -882,7 +778,7 @@ def _owens_t_unit(h: np.ndarray, a: np.ndarray) -> np.ndarray:
 
     """
     shape, dtype = h.shape, h.dtype.type
-    get = _SCRATCH.get
+    get = scratch.get
     a2 = get("owens_a2", shape, dtype)
     half_h2 = get("owens_q", shape, dtype)
     y = get("owens_y", shape, dtype)
@@ -905,9 +801,9 @@ def _owens_t_unit(h: np.ndarray, a: np.ndarray) -> np.ndarray:
     return total
 
 
-def _upper_tail(x: np.ndarray) -> np.ndarray:
+def _upper_tail(x: np.ndarray, scratch: Scratch) -> np.ndarray:
     """Q(x) = P(Z > x) for 0 <= x <= _FAR_MAX by linear interpolation (see _Q_STEP); a scratch view."""
-    get = _SCRATCH.get
+    get = scratch.get
     node = get("tail_node", x.shape)
     index = get("tail_index", x.shape, np.intp)
     out = get("tail_out", x.shape)

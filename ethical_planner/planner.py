@@ -25,6 +25,7 @@ from ethical_planner.risk import RiskAssessment, assess_risk
 from ethical_planner.road_users import EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser, RoadUserType, Shape
 from ethical_planner.sampling import Candidates, emergency_braking, frenet_state, sample_candidates
 from ethical_planner.validity import Validity, physically_invalid, validity_levels
+from ethical_planner.workers import Workers
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -186,8 +187,10 @@ class Planner:
         environment: the road.
         ego_shape: footprint of the ego [m].
         ego_mass: [kg].
-        predictor: predicts the road users when ``plan`` is given no prediction; by
-            default the one named by ``config.prediction.model``.
+        predictor: predicts the other road users every cycle (any ``Predictor``);
+            None builds the one named by ``config.prediction.model``.
+        workers: threads and scratch buffers of the risk kernels; None makes one with
+            ``ETHICAL_PLANNER_THREADS`` threads.
     """
 
     def __init__(
@@ -197,6 +200,7 @@ class Planner:
         ego_shape: Shape = EGO_SHAPE,
         ego_mass: float = EGO_MASS_KG,
         predictor: Predictor | None = None,
+        workers: Workers | None = None,
     ) -> None:
         if not isinstance(config, PlannerConfig):
             raise ValueError("config must be a PlannerConfig (see ethical_planner.preset)")
@@ -206,13 +210,19 @@ class Planner:
             raise ValueError("ego_shape must be a Shape")
         if not (math.isfinite(ego_mass) and ego_mass > 0):
             raise ValueError(f"ego_mass must be a finite mass > 0 kg, got {ego_mass}")
-        if predictor is not None and not isinstance(predictor, Predictor):
-            raise ValueError("predictor must follow the Predictor protocol: name, predict(road_users, times)")
+        if predictor is None:
+            predictor = make_predictor(config.prediction)
+        elif not isinstance(predictor, Predictor):
+            raise ValueError(
+                f"predictor must follow the Predictor protocol (a name and predict(road_users, times)), "
+                f"got {type(predictor).__name__}"
+            )
         self.config = config
-        self.predictor = predictor if predictor is not None else make_predictor(config.prediction)
         self.environment = environment
         self.ego_shape = ego_shape
         self.ego_mass = float(ego_mass)
+        self.predictor = predictor
+        self.workers = Workers() if workers is None else workers
         self.dv_correction = _load_correction(config.risk.delta_v_correction)
         self.desired_speed = (
             config.desired_speed if config.desired_speed is not None else environment.speed_limit
@@ -235,6 +245,7 @@ class Planner:
             self.environment,
             config.risk,
             self.dv_correction,
+            self.workers,
         )
         timings["risk"] = timings.get("risk", 0.0) + _since(clock)
         clock = time.perf_counter()
@@ -303,7 +314,8 @@ class Planner:
             ego_state: current state of the ego's centre.
             road_users: every other road user the ego perceives (may be empty).
             prediction: a prediction on the planner's time grid; by default the
-                planner's predictor (``config.prediction.model``) makes one.
+                planner's predictor makes one. Either way its covariances are floored
+                at ``config.prediction.covariance_floor``.
 
         Returns:
             The decision; never None. If every candidate is physically invalid, the
@@ -322,6 +334,9 @@ class Planner:
         clock = time.perf_counter()
         if prediction is None:
             prediction = self.predictor.predict(road_users, candidates.t)
+            if not isinstance(prediction, Prediction):
+                kind = type(prediction).__name__
+                raise ValueError(f"predictor {self.predictor.name!r} returned {kind}, not a Prediction")
         if prediction.mean.shape[1] != len(candidates.t):
             raise ValueError(
                 f"prediction has {prediction.mean.shape[1]} steps; the planner needs "

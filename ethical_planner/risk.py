@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from ethical_planner.collision_probability import _parallel_for, _submit, _threads, collision_probability
+from ethical_planner.collision_probability import collision_probability
 from ethical_planner.config import RiskConfig
 from ethical_planner.dv_correction import DeltaVCorrection
 from ethical_planner.environment import RoadEnvironment
@@ -21,6 +21,7 @@ from ethical_planner.harm import HarmModel, boundary_harm, collision_harm
 from ethical_planner.prediction.base import Prediction
 from ethical_planner.road_users import Shape
 from ethical_planner.sampling import Candidates
+from ethical_planner.workers import Workers
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -107,19 +108,23 @@ def assess_risk(
     environment: RoadEnvironment,
     config: RiskConfig,
     dv_correction: DeltaVCorrection | None = None,
+    workers: Workers | None = None,
 ) -> RiskAssessment:
     """Collision probability, harm and risk of every candidate for every road user.
 
     ``dv_correction`` (from ``etp impacts``' calibration) scales the Eq. 1 delta-v of
     both bodies towards what physical impacts produce before harm is evaluated.
+    ``workers`` lends its threads and scratch buffers to large problems (a planner
+    passes its own; None makes a fresh one for this call).
     """
+    workers = Workers() if workers is None else workers
     n, n_t = candidates.x.shape
     k = prediction.n_obs
     # shapely releases the GIL: on large problems the road-edge test runs on a helper
     # thread beside the collision probability (on small ones the hand-over costs more).
     outside_job = None
     if k and n * n_t >= _OVERLAP_MIN_POSES:
-        outside_job = _submit(lambda: outside_drivable_area(candidates, ego_shape, environment))
+        outside_job = workers.submit(lambda: outside_drivable_area(candidates, ego_shape, environment))
     cp = collision_probability(
         candidates.x,
         candidates.y,
@@ -132,6 +137,7 @@ def assess_risk(
         prediction.length,
         prediction.width,
         gate_sigmas=config.gate_sigmas,
+        workers=workers,
     )
     p = cp.probability
     harm_obs = np.zeros((n, k, n_t))
@@ -151,6 +157,7 @@ def assess_risk(
             ego_shape,
             dv_correction,
             (harm_obs, harm_ego, risk_obs, risk_ego),
+            workers,
         )
     peak_step = p.argmax(axis=2) if n_t else np.zeros((n, k), dtype=int)
 
@@ -197,6 +204,7 @@ def _harm_and_risk(
     ego_shape: Shape,
     dv_correction: DeltaVCorrection | None,
     out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    workers: Workers,
 ) -> None:
     """Harm at the triples with p > 0 and the risks R = max_t p H (Eq. 3), in chunks.
 
@@ -210,6 +218,7 @@ def _harm_and_risk(
         ego_shape: the ego's footprint (used by ``dv_correction``).
         dv_correction: optional calibrated delta-v correction.
         out: harm_obs, harm_ego (n, k, t) and risk_obs, risk_ego (n, k), zeros, written.
+        workers: threads for large problems.
     """
     n_traj, k, n_t = p.shape
     harm_obs, harm_ego, risk_obs, risk_ego = out
@@ -243,7 +252,7 @@ def _harm_and_risk(
     # Chunk boundaries at the start of a (traj, obs) pair, so that each chunk owns the
     # risks of its pairs: chunks then write disjoint parts of every output.
     size = _HARM_CHUNK
-    if flat.size >= _HARM_PARALLEL_MIN and _threads() > 1:
+    if flat.size >= _HARM_PARALLEL_MIN and workers.threads > 1:
         size = max(size, -(-flat.size // 4))
     cuts = [0]
     while cuts[-1] + size < flat.size:
@@ -285,4 +294,4 @@ def _harm_and_risk(
         risk_ego.ravel()[pair[starts]] = np.maximum.reduceat(p_f * result.harm_ego, starts)
 
     # Elementwise per triple and disjoint per chunk: any split gives the same numbers.
-    _parallel_for(list(zip(cuts[:-1], cuts[1:], strict=True)), run)
+    workers.parallel_for(list(zip(cuts[:-1], cuts[1:], strict=True)), run)

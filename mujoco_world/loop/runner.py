@@ -23,6 +23,7 @@ import numpy as np
 
 from ethical_planner.config import PlannerConfig, preset
 from ethical_planner.planner import Decision, Planner
+from ethical_planner.prediction import Predictor
 from ethical_planner.records import to_plain
 from ethical_planner.road_users import VULNERABLE_TYPES, Shape
 from ethical_planner.validation import check, check_positive
@@ -261,6 +262,7 @@ def run_scenario(
     seed: int = 0,
     config: RunConfig | None = None,
     observer: RunObserver | None = None,
+    predictor: Predictor | None = None,
 ) -> RunSummary:
     """Run one scenario in closed loop.
 
@@ -271,6 +273,8 @@ def run_scenario(
             deterministic.
         config: loop settings.
         observer: hooks (recording, live plots...).
+        predictor: the planner's predictor (any ``Predictor``); None uses the one
+            named by the planner configuration's ``prediction.model``.
 
     Returns:
         The run summary; never raises for planner errors or diverging physics
@@ -287,7 +291,9 @@ def run_scenario(
         scenario, config.control, 1.0 / config.behaviour_rate, config.timestep, config.control_interval
     )
     ego = scenario.ego
-    planner_obj = Planner(planner_config, world.environment(), Shape(ego.length, ego.width), ego.mass)
+    planner_obj = Planner(
+        planner_config, world.environment(), Shape(ego.length, ego.width), ego.mass, predictor=predictor
+    )
     rng = np.random.default_rng(seed)
     risk_model = planner_config.risk
     steps_per_cycle = max(int(round(1.0 / (config.replan_rate * world.scene.dt))), 1)

@@ -21,6 +21,7 @@ from ethical_planner.collision_probability import (
     collision_probability,
     polygon_gaussian_mass,
 )
+from ethical_planner.workers import Workers
 
 # Documented accuracy of collision_probability against the closed form (its module
 # docstring: float32 Gauss-Legendre Owen's T within 3e-8 per term, a tabulated normal
@@ -542,18 +543,19 @@ def test_owens_t_kernel_and_tail_table_against_scipy():
     from scipy.special import owens_t
 
     from ethical_planner.collision_probability import _FAR_MAX, _owens_t_unit, _upper_tail
+    from ethical_planner.workers import Scratch
 
     h = np.linspace(0.0, _FAR_MAX, 801)[:, None] * np.ones((1, 401))
     a = np.linspace(0.0, 1.0, 401)[None, :] * np.ones((801, 1))
-    t32 = _owens_t_unit(h.astype(np.float32), a.astype(np.float32)).astype(float)
+    t32 = _owens_t_unit(h.astype(np.float32), a.astype(np.float32), Scratch()).astype(float)
     assert np.max(np.abs(t32 - owens_t(h, a))) < 3e-8
-    t64 = _owens_t_unit(h, a)
+    t64 = _owens_t_unit(h, a, Scratch())
     assert np.max(np.abs(t64 - owens_t(h, a))) < 5e-9
     x = np.linspace(0.0, _FAR_MAX, 100_001)
-    assert np.max(np.abs(_upper_tail(x) - ndtr(-x))) < 2e-9
+    assert np.max(np.abs(_upper_tail(x, Scratch()) - ndtr(-x))) < 2e-9
 
 
-def test_threads_do_not_change_results(monkeypatch):
+def test_threads_do_not_change_results():
     # Large enough for the threaded path; every triple is computed elementwise, so the
     # split over threads must not change a single bit.
     rng = np.random.default_rng(8)
@@ -569,13 +571,11 @@ def test_threads_do_not_change_results(monkeypatch):
     cov = np.array([[_cov(0.3 + 0.5 * tt, 0.2 + 0.3 * tt, 0.0) for tt in t] for _ in range(n_obs)])
     heading = np.zeros((n_obs, n_t))
     args = (ego_x, ego_y, ego_yaw, 4.5, 1.8, mean, cov, heading, np.full(n_obs, 4.5), np.full(n_obs, 1.8))
-    results = []
-    for threads in ("1", "2"):
-        monkeypatch.setenv("ETHICAL_PLANNER_THREADS", threads)
-        results.append(collision_probability(*args))
+    results = [collision_probability(*args, workers=Workers(threads)) for threads in (1, 2, 3)]
     assert results[0].probability.size >= 200_000 and results[0].probability.max() > 0.5
-    np.testing.assert_array_equal(results[0].probability, results[1].probability)
-    np.testing.assert_array_equal(results[0].mean_overlap, results[1].mean_overlap)
+    for other in results[1:]:
+        np.testing.assert_array_equal(results[0].probability, other.probability)
+        np.testing.assert_array_equal(results[0].mean_overlap, other.mean_overlap)
 
 
 def test_drivable_area_shortcut_matches_the_corner_test():

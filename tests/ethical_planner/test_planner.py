@@ -1,3 +1,4 @@
+import dataclasses
 import json
 import math
 
@@ -9,6 +10,7 @@ from ethical_planner.config import preset
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.harm import collision_harm
 from ethical_planner.planner import Planner
+from ethical_planner.prediction import make_predictor
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, KinematicState, RoadUser, RoadUserType
 from ethical_planner.situations import oncoming_in_ego_lane_with_pedestrian, overtaking_cyclist
 from ethical_planner.validity import Validity
@@ -209,3 +211,48 @@ def test_a_user_predictor_is_used_by_the_planner():
     assert calls == [int(round(max(preset("ethical").sampling.horizons) / 0.1)) + 1]
     with pytest.raises(ValueError, match="Predictor protocol"):
         Planner(preset("ethical"), situation.environment, predictor=object())
+
+
+class _NobodyNearPredictor:
+    """A predictor written for the test: every road user is predicted 300 m away."""
+
+    name = "nobody_near"
+
+    def __init__(self, config):
+        self.inner = make_predictor(config)
+        self.calls = 0
+
+    def predict(self, road_users, times):
+        self.calls += 1
+        base = self.inner.predict(road_users, times)
+        return dataclasses.replace(base, mean=base.mean + np.array([300.0, 0.0]))
+
+
+def test_a_custom_predictor_changes_the_decision():
+    """The planner takes any Predictor: one that sees the road clear lets it overtake."""
+    situation = overtaking_cyclist()
+    config = preset("standard").with_overrides(
+        {"sampling": {"horizons": [3.0]}, "risk": {"max_acceptable_risk": 0.01}}
+    )
+    cyclist_end_x = situation.road_users[0].state.x + 4.0 * 3.0
+    default = Planner(config, situation.environment)
+    assert default.predictor.name == config.prediction.model
+    behind = default.plan(situation.ego, situation.road_users)
+    assert behind.trajectory.x[-1] < cyclist_end_x - 2.0  # stays behind the cyclist
+
+    predictor = _NobodyNearPredictor(config.prediction)
+    custom = Planner(config, situation.environment, predictor=predictor)
+    past = custom.plan(situation.ego, situation.road_users)
+    assert predictor.calls == 1
+    assert past.prediction.mean[0, 0, 0] == pytest.approx(situation.road_users[0].state.x + 300.0)
+    assert past.trajectory.x[-1] > behind.trajectory.x[-1] + 5.0  # keeps its speed
+    assert past.road_users[0].risk == 0.0
+
+
+def test_predictor_is_checked_and_named_by_the_registry():
+    env = overtaking_cyclist().environment
+    with pytest.raises(ValueError, match="Predictor protocol"):
+        Planner(preset("ethical"), env, predictor=object())
+    unknown = preset("ethical").with_overrides({"prediction": {"model": "walenet"}})
+    with pytest.raises(ValueError, match="unknown predictor 'walenet'; allowed: .*constant_turn_rate"):
+        Planner(unknown, env)

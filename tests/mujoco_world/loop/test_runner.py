@@ -186,3 +186,23 @@ def test_random_scenarios_never_fail():
         summary = run_scenario(scenario, "ethical", seed=0)
         assert summary.outcome != "failed", (scenario.name, summary.reason)
         assert_json_clean(summary)
+
+
+def test_run_scenario_plans_with_the_predictor_it_is_given():
+    from ethical_planner.config import PredictionConfig
+    from ethical_planner.prediction import make_predictor
+
+    class Counting:
+        name = "counting"
+
+        def __init__(self):
+            self.inner = make_predictor(PredictionConfig())
+            self.calls = 0
+
+        def predict(self, road_users, times):
+            self.calls += 1
+            return self.inner.predict(road_users, times)
+
+    predictor = Counting()
+    summary = run_scenario(third_party_crash(duration=1.0), "ethical", predictor=predictor)
+    assert summary.cycles > 0 and predictor.calls == summary.cycles
