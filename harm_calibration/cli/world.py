@@ -93,9 +93,10 @@ def _check_planner(name: str) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from mujoco_world.loop.batch import resolve_scenario, write_json
+    from mujoco_world.loop.batch import write_json
     from mujoco_world.loop.runner import RunConfig, run_scenario
     from mujoco_world.loop.world import ObservationNoise
+    from mujoco_world.scenario.sources import resolve_scenario
 
     _check_planner(args.planner)
     scenario = resolve_scenario(args.scenario)

@@ -1,5 +1,8 @@
 """Behaviour of the road users: scripted, car following (IDM), crossing pedestrians, parked.
 
+Each behaviour is a ``BehaviourModel`` registered in ``BEHAVIOURS`` under its
+``BehaviourKind`` value; the ``Fleet`` looks the models up once and holds the states.
+
 Every road user follows its route with an *intended* longitudinal state (arc length
 ``s`` [m], speed ``v`` [m/s]) and a lateral offset ``d`` [m] from the route. The
 behaviours decide an acceleration and a lateral motion at a behaviour rate (default
@@ -15,10 +18,12 @@ import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 
 from ethical_planner.reference_path import ReferencePath
+from ethical_planner.registry import Registry
 from ethical_planner.road_users import LegalCorridor, RoadUserType
 from mujoco_world.scenario.spec import BehaviourKind, RoadUserSpec
 
@@ -160,14 +165,17 @@ class Fleet:
         self.active = np.ones(self.k, dtype=bool)  # False once crashed
         self._next_tick = 0.0
         self._time = 0.0
-        self._crossing = np.zeros(self.k, dtype=bool)
-        self._delay: list[deque[float] | None] = []
+        #: Pedestrians that have started to cross, (k,) bool.
+        self.crossing = np.zeros(self.k, dtype=bool)
+        #: Reaction-time queues of decided accelerations (None without a delay).
+        self.delay: list[deque[float] | None] = []
         for u in self.specs:
             idm = u.behaviour.idm
             ticks = int(round(idm.reaction_time / self.tick)) if idm is not None else 0
-            self._delay.append(deque([0.0] * ticks) if ticks > 0 else None)
+            self.delay.append(deque([0.0] * ticks) if ticks > 0 else None)
         self._kind = [u.behaviour.kind for u in self.specs]
-        self._is_idm = np.array([k is BehaviourKind.IDM for k in self._kind], dtype=bool)
+        self._models_by_kind = {kind: BEHAVIOURS.get(kind.value) for kind in dict.fromkeys(self._kind)}
+        self._kind_mask = {kind: np.array([k is kind for k in self._kind]) for kind in self._models_by_kind}
 
     # ------------------------------------------------------------------ states
 
@@ -217,15 +225,18 @@ class Fleet:
         return time >= self._next_tick - 1e-9
 
     def decide(self, view: WorldView) -> None:
-        """Update accelerations and lateral motions of all active road users."""
+        """Update accelerations and lateral motions of all active road users.
+
+        Each road user's behaviour model (``BEHAVIOURS``, by ``behaviour.kind``) first
+        sees all its active road users at once (``prepare``), then decides for each.
+        """
         t = view.time
         self._next_tick = t + self.tick
         ego_pos = view.position[0]
-        idm_rows = np.flatnonzero(self._is_idm & self.active)
-        leaders = {}
-        if idm_rows.size:
-            gaps, speeds = self._leaders(idm_rows, view)
-            leaders = {int(i): (float(g), float(v)) for i, g, v in zip(idm_rows, gaps, speeds, strict=True)}
+        contexts = {}
+        for kind, model in self._models_by_kind.items():
+            rows = np.flatnonzero(self._kind_mask[kind] & self.active)
+            contexts[kind] = model.prepare(self, rows, view) if rows.size else None
         for i, spec in enumerate(self.specs):
             if not self.active[i]:
                 continue
@@ -237,129 +248,22 @@ class Fleet:
                     self.activated_at[i] = t
             since = t - self.activated_at[i]
             kind = self._kind[i]
-            if kind is BehaviourKind.PARKED:
-                self.a[i], self.v[i] = 0.0, 0.0
-                continue
-            if math.isfinite(since) and b.lateral:
+            model = self._models_by_kind[kind]
+            if model.moves and math.isfinite(since) and b.lateral:
                 d_next, _, _ = smoothstep_profile(b.lateral, since + self.tick)
                 _, _, accel = smoothstep_profile(b.lateral, since)
                 self.d_rate[i] = (d_next - self.d[i]) / self.tick
                 self.d_accel[i] = accel
-            if kind is BehaviourKind.SCRIPTED:
-                self.a[i] = self._scripted(i, since)
-            elif kind is BehaviourKind.IDM:
-                self.a[i] = self._idm(i, since, view, *leaders[i])
-            else:
-                self.a[i] = self._pedestrian(i, since, view)
+            self.a[i] = model.acceleration(self, i, since, view, contexts[kind])
+            if not model.moves:
+                self.v[i] = 0.0
 
-    def _target_speed(self, i: int, since: float) -> float:
+    def target_speed(self, i: int, since: float) -> float:
+        """Speed road user ``i`` wants [m/s], ``since`` [s] after its behaviour started."""
         b = self.specs[i].behaviour
         if not math.isfinite(since):
             return b.speed
         return linear_profile(b.speed_profile, since, b.speed)
-
-    def _scripted(self, i: int, since: float) -> float:
-        target = self._target_speed(i, since + self.tick if math.isfinite(since) else since)
-        return float(np.clip((target - self.v[i]) / self.tick, -SCRIPTED_ACCEL_LIMIT, SCRIPTED_ACCEL_LIMIT))
-
-    def _leaders(self, rows: np.ndarray, view: WorldView) -> tuple[np.ndarray, np.ndarray]:
-        """Gap [m] to and speed [m/s] of the nearest body ahead on the routes of ``rows``.
-
-        Every other body is projected onto the first ``look_ahead`` metres of each
-        route (sampled every metre, refined along the tangent); it leads if it
-        overlaps the route's lane laterally. Vectorised over rows and bodies.
-
-        Returns:
-            (gap, speed), each (m,); inf and 0 where nothing is ahead.
-        """
-        m = len(rows)
-        horizon = max(self.specs[i].behaviour.idm.look_ahead for i in rows)
-        samples = np.arange(0.0, horizon + 1e-9, 1.0)
-        n_s = samples.size
-        x, y, theta, _ = self.routes.lookup(rows[:, None], self.s[rows, None] + samples[None, :])
-        pos = view.position
-        dx = pos[None, :, 0, None] - x[:, None, :]  # (m, n, n_s)
-        dy = pos[None, :, 1, None] - y[:, None, :]
-        nearest = np.argmin(dx * dx + dy * dy, axis=2)  # (m, n)
-        dxn = np.take_along_axis(dx, nearest[..., None], axis=2)[..., 0]
-        dyn = np.take_along_axis(dy, nearest[..., None], axis=2)[..., 0]
-        heading = np.take_along_axis(theta, nearest, axis=1)
-        c, s = np.cos(heading), np.sin(heading)
-        lateral = np.abs(-dxn * s + dyn * c)
-        rel = view.yaw[None, :] - heading
-        length, width = view.length[None, :], view.width[None, :]
-        half_along = 0.5 * (length * np.abs(np.cos(rel)) + width * np.abs(np.sin(rel)))
-        half_across = 0.5 * (length * np.abs(np.sin(rel)) + width * np.abs(np.cos(rel)))
-        me = rows + 1
-        along = samples[nearest] + dxn * c + dyn * s
-        gap = along - 0.5 * view.length[me, None] - half_along
-        limit = np.array([self.specs[i].behaviour.idm.look_ahead for i in rows])
-        valid = (
-            (lateral < 0.5 * view.width[me, None] + half_across + 0.3)
-            & (nearest > 0)
-            & (nearest < n_s - 1)
-            & (samples[nearest] <= limit[:, None])
-        )
-        valid[np.arange(m), me] = False
-        gap = np.where(valid, gap, np.inf)
-        j = np.argmin(gap, axis=1)
-        best = gap[np.arange(m), j]
-        vel = view.velocity[j]
-        hj = heading[np.arange(m), j]
-        speed = np.where(np.isfinite(best), vel[:, 0] * np.cos(hj) + vel[:, 1] * np.sin(hj), 0.0)
-        return best, speed
-
-    def _idm(self, i: int, since: float, view: WorldView, gap: float, v_lead: float) -> float:
-        spec = self.specs[i]
-        p = spec.behaviour.idm
-        v = float(self.v[i])
-        v0 = max(self._target_speed(i, since), 0.1)
-        if p.stop_at is not None and view.time < p.stop_until:
-            line_gap = p.stop_at - self.s[i] - 0.5 * view.length[i + 1]
-            if line_gap > v * v / (2.0 * p.max_deceleration) - 0.5 and line_gap < gap:
-                gap, v_lead = max(line_gap, 0.0), 0.0
-        free = 1.0 - (v / v0) ** 4
-        if math.isfinite(gap):
-            brake_term = v * (v - v_lead) / (2.0 * math.sqrt(p.max_acceleration * p.comfort_deceleration))
-            s_star = p.min_gap + max(0.0, v * p.time_headway + brake_term)
-            acc = p.max_acceleration * (free - (s_star / max(gap, 0.1)) ** 2)
-        else:
-            acc = p.max_acceleration * free
-        acc = float(np.clip(acc, -p.max_deceleration, p.max_acceleration))
-        queue = self._delay[i]
-        if queue is not None:
-            queue.append(acc)
-            acc = queue.popleft()
-        return acc
-
-    def _pedestrian(self, i: int, since: float, view: WorldView) -> float:
-        spec = self.specs[i]
-        crossing = spec.behaviour.crossing
-        v, s = float(self.v[i]), float(self.s[i])
-        speed = self._target_speed(i, since)
-        if not self._crossing[i] and s < crossing.wait_at + 0.05:
-            if self._gap_clear(i, view, crossing.gap_time, crossing.corridor) and s >= crossing.wait_at - 0.3:
-                self._crossing[i] = True
-            else:
-                remaining = max(crossing.wait_at - s, 0.0)
-                speed = min(speed, math.sqrt(2.0 * 1.0 * remaining))
-        elif not self._crossing[i]:
-            self._crossing[i] = True
-        return float(np.clip((speed - v) / self.tick, -3.0, 1.5))
-
-    def _gap_clear(self, i: int, view: WorldView, gap_time: float, corridor: float) -> bool:
-        me = i + 1
-        pos = view.position
-        rel = pos[me] - pos
-        c, s = np.cos(view.yaw), np.sin(view.yaw)
-        along = rel[:, 0] * c + rel[:, 1] * s
-        across = -rel[:, 0] * s + rel[:, 1] * c
-        speed = view.velocity[:, 0] * c + view.velocity[:, 1] * s
-        vehicle = np.array([t is not RoadUserType.PEDESTRIAN for t in view.types])
-        vehicle[me] = False
-        approaching = vehicle & (speed > 0.5) & (along > -0.5 * view.length) & (np.abs(across) < corridor)
-        time_to_arrive = (along - 0.5 * view.length) / np.maximum(speed, 0.5)
-        return not bool(np.any(approaching & (time_to_arrive < gap_time)))
 
     # ------------------------------------------------------------------ legal corridors
 
@@ -379,3 +283,182 @@ class Fleet:
             limit = legal.speed_limit if legal.speed_limit is not None else self.road_speed_limit
             out.append(LegalCorridor(limit, legal.lateral_half_width, stop))
         return out
+
+
+class BehaviourModel(Protocol):
+    """How road users of one ``BehaviourKind`` decide their longitudinal acceleration.
+
+    A new behaviour is one class registered in ``BEHAVIOURS`` under its kind's value
+    (and its parameters in ``BehaviourSpec``). Models keep no state of their own: the
+    ``Fleet`` holds the road users' states.
+
+    Attributes:
+        moves: False for a body that holds still (its speed is set to 0, no lateral
+            profile).
+    """
+
+    moves: bool
+
+    def prepare(self, fleet: Fleet, rows: np.ndarray, view: WorldView) -> Any:
+        """Work shared by the active road users ``rows`` (k,) of this kind, vectorised."""
+        ...
+
+    def acceleration(self, fleet: Fleet, i: int, since: float, view: WorldView, context: Any) -> float:
+        """Longitudinal acceleration [m/s^2] of road user ``i`` (``context`` from ``prepare``)."""
+        ...
+
+
+#: Behaviour models by ``BehaviourKind`` value.
+BEHAVIOURS: Registry[BehaviourModel] = Registry("behaviour")
+
+
+class _Parked:
+    """Holds its start pose with its brakes."""
+
+    moves = False
+
+    def prepare(self, fleet: Fleet, rows: np.ndarray, view: WorldView) -> None:
+        return None
+
+    def acceleration(self, fleet: Fleet, i: int, since: float, view: WorldView, context: Any) -> float:
+        return 0.0
+
+
+class _Scripted:
+    """Follows its speed profile, blind to everything."""
+
+    moves = True
+
+    def prepare(self, fleet: Fleet, rows: np.ndarray, view: WorldView) -> None:
+        return None
+
+    def acceleration(self, fleet: Fleet, i: int, since: float, view: WorldView, context: Any) -> float:
+        target = fleet.target_speed(i, since + fleet.tick if math.isfinite(since) else since)
+        return float(np.clip((target - fleet.v[i]) / fleet.tick, -SCRIPTED_ACCEL_LIMIT, SCRIPTED_ACCEL_LIMIT))
+
+
+class _IntelligentDriver:
+    """Car following (intelligent driver model) behind the nearest body on its route."""
+
+    moves = True
+
+    def prepare(self, fleet: Fleet, rows: np.ndarray, view: WorldView) -> dict[int, tuple[float, float]]:
+        gaps, speeds = _leaders(fleet, rows, view)
+        return {int(i): (float(g), float(v)) for i, g, v in zip(rows, gaps, speeds, strict=True)}
+
+    def acceleration(
+        self, fleet: Fleet, i: int, since: float, view: WorldView, context: dict[int, tuple[float, float]]
+    ) -> float:
+        gap, v_lead = context[i]
+        p = fleet.specs[i].behaviour.idm
+        v = float(fleet.v[i])
+        v0 = max(fleet.target_speed(i, since), 0.1)
+        if p.stop_at is not None and view.time < p.stop_until:
+            line_gap = p.stop_at - fleet.s[i] - 0.5 * view.length[i + 1]
+            if line_gap > v * v / (2.0 * p.max_deceleration) - 0.5 and line_gap < gap:
+                gap, v_lead = max(line_gap, 0.0), 0.0
+        free = 1.0 - (v / v0) ** 4
+        if math.isfinite(gap):
+            brake_term = v * (v - v_lead) / (2.0 * math.sqrt(p.max_acceleration * p.comfort_deceleration))
+            s_star = p.min_gap + max(0.0, v * p.time_headway + brake_term)
+            acc = p.max_acceleration * (free - (s_star / max(gap, 0.1)) ** 2)
+        else:
+            acc = p.max_acceleration * free
+        acc = float(np.clip(acc, -p.max_deceleration, p.max_acceleration))
+        queue = fleet.delay[i]
+        if queue is not None:
+            queue.append(acc)
+            acc = queue.popleft()
+        return acc
+
+
+class _Pedestrian:
+    """Walks to ``crossing.wait_at``, waits for a gap in the traffic, then crosses."""
+
+    moves = True
+
+    def prepare(self, fleet: Fleet, rows: np.ndarray, view: WorldView) -> None:
+        return None
+
+    def acceleration(self, fleet: Fleet, i: int, since: float, view: WorldView, context: Any) -> float:
+        crossing = fleet.specs[i].behaviour.crossing
+        v, s = float(fleet.v[i]), float(fleet.s[i])
+        speed = fleet.target_speed(i, since)
+        if not fleet.crossing[i] and s < crossing.wait_at + 0.05:
+            if _gap_clear(i, view, crossing.gap_time, crossing.corridor) and s >= crossing.wait_at - 0.3:
+                fleet.crossing[i] = True
+            else:
+                remaining = max(crossing.wait_at - s, 0.0)
+                speed = min(speed, math.sqrt(2.0 * 1.0 * remaining))
+        elif not fleet.crossing[i]:
+            fleet.crossing[i] = True
+        return float(np.clip((speed - v) / fleet.tick, -3.0, 1.5))
+
+
+BEHAVIOURS.register(BehaviourKind.SCRIPTED.value, _Scripted())
+BEHAVIOURS.register(BehaviourKind.IDM.value, _IntelligentDriver())
+BEHAVIOURS.register(BehaviourKind.PEDESTRIAN.value, _Pedestrian())
+BEHAVIOURS.register(BehaviourKind.PARKED.value, _Parked())
+
+
+def _leaders(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarray, np.ndarray]:
+    """Gap [m] to and speed [m/s] of the nearest body ahead on the routes of ``rows``.
+
+    Every other body is projected onto the first ``look_ahead`` metres of each
+    route (sampled every metre, refined along the tangent); it leads if it
+    overlaps the route's lane laterally. Vectorised over rows and bodies.
+
+    Returns:
+        (gap, speed), each (m,); inf and 0 where nothing is ahead.
+    """
+    m = len(rows)
+    horizon = max(fleet.specs[i].behaviour.idm.look_ahead for i in rows)
+    samples = np.arange(0.0, horizon + 1e-9, 1.0)
+    n_s = samples.size
+    x, y, theta, _ = fleet.routes.lookup(rows[:, None], fleet.s[rows, None] + samples[None, :])
+    pos = view.position
+    dx = pos[None, :, 0, None] - x[:, None, :]  # (m, n, n_s)
+    dy = pos[None, :, 1, None] - y[:, None, :]
+    nearest = np.argmin(dx * dx + dy * dy, axis=2)  # (m, n)
+    dxn = np.take_along_axis(dx, nearest[..., None], axis=2)[..., 0]
+    dyn = np.take_along_axis(dy, nearest[..., None], axis=2)[..., 0]
+    heading = np.take_along_axis(theta, nearest, axis=1)
+    c, s = np.cos(heading), np.sin(heading)
+    lateral = np.abs(-dxn * s + dyn * c)
+    rel = view.yaw[None, :] - heading
+    length, width = view.length[None, :], view.width[None, :]
+    half_along = 0.5 * (length * np.abs(np.cos(rel)) + width * np.abs(np.sin(rel)))
+    half_across = 0.5 * (length * np.abs(np.sin(rel)) + width * np.abs(np.cos(rel)))
+    me = rows + 1
+    along = samples[nearest] + dxn * c + dyn * s
+    gap = along - 0.5 * view.length[me, None] - half_along
+    limit = np.array([fleet.specs[i].behaviour.idm.look_ahead for i in rows])
+    valid = (
+        (lateral < 0.5 * view.width[me, None] + half_across + 0.3)
+        & (nearest > 0)
+        & (nearest < n_s - 1)
+        & (samples[nearest] <= limit[:, None])
+    )
+    valid[np.arange(m), me] = False
+    gap = np.where(valid, gap, np.inf)
+    j = np.argmin(gap, axis=1)
+    best = gap[np.arange(m), j]
+    vel = view.velocity[j]
+    hj = heading[np.arange(m), j]
+    speed = np.where(np.isfinite(best), vel[:, 0] * np.cos(hj) + vel[:, 1] * np.sin(hj), 0.0)
+    return best, speed
+
+
+def _gap_clear(i: int, view: WorldView, gap_time: float, corridor: float) -> bool:
+    me = i + 1
+    pos = view.position
+    rel = pos[me] - pos
+    c, s = np.cos(view.yaw), np.sin(view.yaw)
+    along = rel[:, 0] * c + rel[:, 1] * s
+    across = -rel[:, 0] * s + rel[:, 1] * c
+    speed = view.velocity[:, 0] * c + view.velocity[:, 1] * s
+    vehicle = np.array([t is not RoadUserType.PEDESTRIAN for t in view.types])
+    vehicle[me] = False
+    approaching = vehicle & (speed > 0.5) & (along > -0.5 * view.length) & (np.abs(across) < corridor)
+    time_to_arrive = (along - 0.5 * view.length) / np.maximum(speed, 0.5)
+    return not bool(np.any(approaching & (time_to_arrive < gap_time)))

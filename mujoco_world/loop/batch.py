@@ -23,7 +23,7 @@ from typing import Any
 
 from ethical_planner.validation import check
 from mujoco_world.loop.runner import GROUPS, OUTCOMES, RunConfig, run_scenario
-from mujoco_world.scenario.spec import Scenario, load_scenario
+from mujoco_world.scenario.sources import resolve_scenario
 
 #: Planner presets of the paper's comparison.
 PLANNERS = ("ethical", "selfish", "standard")
@@ -59,15 +59,6 @@ class RunTask:
     def summary_path(self) -> Path:
         """Path of this run's summary.json."""
         return self.run_dir / "summary.json"
-
-
-def resolve_scenario(name: str) -> Scenario:
-    """A scenario from a ``.toml`` path, a catalog name or a generated name (``family-s3-17``)."""
-    from mujoco_world.scenario.catalog import scenario_by_name
-
-    if name.endswith(".toml") or os.sep in name:
-        return load_scenario(name)
-    return scenario_by_name(name)
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:

@@ -519,21 +519,24 @@ def generate_scenarios(n: int, seed: int, families: Sequence[str] | None = None)
     if not names:
         raise ValueError("families must name at least one family")
     for name in generated_names(n, seed, names):
-        yield scenario_by_name(name)
+        yield generated_scenario(name)
 
 
-_GENERATED = re.compile(r"^(?P<family>[a-z_]+)-s(?P<seed>\d+)-(?P<index>\d+)$")
+#: Names of generated scenarios: ``<family>-s<seed>-<index>``.
+GENERATED_NAME = re.compile(r"^(?P<family>[a-z_]+)-s(?P<seed>\d+)-(?P<index>\d+)$")
 
 
-def scenario_by_name(name: str) -> Scenario:
-    """A catalog scenario (``dense_urban``) or a generated one (``dense_urban-s3-17``).
+def generated_scenario(name: str) -> Scenario:
+    """The generated scenario ``<family>-s<seed>-<index>`` (see ``generate_scenarios``).
 
-    Generated names are those of ``generate_scenarios``: the scenario is rebuilt from
-    its family, seed and index alone.
+    It is rebuilt from its family, seed and index alone.
+
+    Raises:
+        ValueError: ``name`` is not such a name, or its family is unknown.
     """
-    match = _GENERATED.match(name)
+    match = GENERATED_NAME.match(name)
     if match is None:
-        return get_scenario(name)
+        raise ValueError(f"{name!r} is not a generated scenario name <family>-s<seed>-<index>")
     seed, index = int(match["seed"]), int(match["index"])
     return random_scenario(match["family"], np.random.default_rng([seed, index]), name=name)
 
@@ -557,6 +560,7 @@ def describe(name: str) -> str:
 
 __all__ = [
     "CATALOG",
+    "GENERATED_NAME",
     "ScenarioFamily",
     "catalog_names",
     "describe",
@@ -564,6 +568,6 @@ __all__ = [
     "generated_names",
     "get_family",
     "get_scenario",
+    "generated_scenario",
     "random_scenario",
-    "scenario_by_name",
 ]

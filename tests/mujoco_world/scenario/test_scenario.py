@@ -15,9 +15,9 @@ from mujoco_world.scenario.catalog import (
     generated_names,
     get_scenario,
     random_scenario,
-    scenario_by_name,
 )
 from mujoco_world.scenario.road import build_road
+from mujoco_world.scenario.sources import SCENARIO_SOURCES, resolve_scenario
 from mujoco_world.scenario.spec import RoadSpec, RouteSpec, Scenario, load_scenario, scenario_from_dict
 
 EXAMPLE = resources.files("mujoco_world").joinpath("data", "example_scenario.toml")
@@ -170,10 +170,22 @@ def test_generated_names_rebuild_their_scenarios():
     names = generated_names(12, seed=9, families=["oncoming_drift", "dense_urban"])
     scenarios = list(generate_scenarios(12, seed=9, families=["oncoming_drift", "dense_urban"]))
     assert [s.name for s in scenarios] == names
-    assert scenario_by_name(names[7]) == scenarios[7]
-    assert scenario_by_name("dense_urban") == get_scenario("dense_urban")
-    with pytest.raises(ValueError, match="unknown scenario 'warp_drive'"):
-        scenario_by_name("warp_drive-s1-2")
+    assert resolve_scenario(names[7]) == scenarios[7]
+    assert resolve_scenario("dense_urban") == get_scenario("dense_urban")
+    with pytest.raises(ValueError, match="unknown scenario 'warp_drive'; allowed: overtake_cyclist"):
+        resolve_scenario("warp_drive-s1-2")
+
+
+def test_scenario_names_resolve_through_the_sources():
+    assert SCENARIO_SOURCES.names() == ("toml", "generated", "catalog")
+    assert resolve_scenario(str(EXAMPLE)).name == "example_cut_in"
+    with pytest.raises(ValueError) as error:
+        resolve_scenario("warp_drive")
+    message = str(error.value)
+    assert message.startswith("unknown scenario 'warp_drive'; allowed: a scenario file *.toml; ")
+    assert "<family>-s<seed>-<index>" in message and "dense_urban" in message
+    with pytest.raises(ValueError, match="cannot read scenario file missing.toml"):
+        resolve_scenario("missing.toml")
 
 
 def test_random_scenarios_build_without_overlap():
