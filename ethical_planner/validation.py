@@ -100,19 +100,17 @@ def finite_array(name: str, value: ArrayLike, allowed: str = "finite numbers") -
 
 def non_negative_array(name: str, value: ArrayLike, unit: str) -> np.ndarray:
     """``value`` as a float array of finite values >= 0 [``unit``], or a ValueError naming it."""
-    allowed = f"finite and >= 0 {unit}"
-    array = finite_array(name, value, allowed)
-    ok = array >= 0.0
-    if not ok.all():
-        _raise_bad(name, array, ok, allowed)
-    return array
+    return _array_where(name, value, f"finite and >= 0 {unit}", np.greater_equal)
 
 
 def positive_array(name: str, value: ArrayLike, unit: str) -> np.ndarray:
     """``value`` as a float array of finite values > 0 [``unit``], or a ValueError naming it."""
-    allowed = f"finite and > 0 {unit}"
+    return _array_where(name, value, f"finite and > 0 {unit}", np.greater)
+
+
+def _array_where(name: str, value: ArrayLike, allowed: str, compare: np.ufunc) -> np.ndarray:
     array = finite_array(name, value, allowed)
-    ok = array > 0.0
+    ok = compare(array, 0.0)
     if not ok.all():
         _raise_bad(name, array, ok, allowed)
     return array

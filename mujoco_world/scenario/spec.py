@@ -404,10 +404,7 @@ class RoadUserSpec:
             isinstance(self.name, str) and self.name.isidentifier(),
             f"road user name must be an identifier (letters, digits, _), got {self.name!r}",
         )
-        try:
-            object.__setattr__(self, "type", RoadUserType.parse(self.type))
-        except ValueError as error:
-            raise ValueError(f"type: {error}") from None
+        object.__setattr__(self, "type", parse_enum(RoadUserType, self.type, "road-user type", "type"))
         check_finite("road_user", s0=self.s0)
         check_positive("road_user", length=self.length, width=self.width, mass=self.mass)
         if self.type is RoadUserType.TRAIN:
@@ -451,10 +448,7 @@ class EgoSpec:
     desired_speed: float | None = None
 
     def __post_init__(self) -> None:
-        try:
-            object.__setattr__(self, "type", RoadUserType.parse(self.type))
-        except ValueError as error:
-            raise ValueError(f"ego.type: {error}") from None
+        object.__setattr__(self, "type", parse_enum(RoadUserType, self.type, "road-user type", "ego.type"))
         object.__setattr__(self, "turn", parse_enum(Turn, self.turn, "turn", "ego.turn"))
         check_positive("ego", length=self.length, width=self.width, mass=self.mass)
         check_non_negative("ego", speed=self.speed, desired_speed=self.desired_speed)
@@ -480,10 +474,8 @@ class RestitutionSpec:
 
     def __post_init__(self) -> None:
         for name in ("a", "b"):
-            try:
-                object.__setattr__(self, name, RoadUserType.parse(getattr(self, name)))
-            except ValueError as error:
-                raise ValueError(f"restitution.{name}: {error}") from None
+            kind = parse_enum(RoadUserType, getattr(self, name), "road-user type", f"restitution.{name}")
+            object.__setattr__(self, name, kind)
         check_finite("restitution", e=self.e)
         check(
             0.01 <= self.e <= 0.75,
