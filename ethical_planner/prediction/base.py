@@ -99,16 +99,11 @@ class Prediction:
         """Return a copy whose covariance eigenvalues are at least ``floor`` [m^2].
 
         A zero or degenerate covariance would make the collision probability a
-        step function; the reference uses 0.1 I for ground-truth predictions. A
-        prediction already at or above the floor (up to rounding, 1e-12 of its largest
-        covariance entry) is returned unchanged, so flooring twice changes nothing.
+        step function; the reference uses 0.1 I for ground-truth predictions.
         """
         if self.n_obs == 0:
             return self
         eigval, eigvec = np.linalg.eigh(self.cov)
-        tolerance = 1e-12 * max(1.0, float(np.abs(self.cov).max(initial=0.0)))
-        if eigval.size == 0 or eigval[..., 0].min() >= floor - tolerance:
-            return self
         eigval = np.maximum(eigval, floor)
         cov = np.einsum("...ij,...j,...kj->...ik", eigvec, eigval, eigvec)
         return Prediction(
