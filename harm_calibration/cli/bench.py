@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from harm_calibration.cli.common import add_json, output_file, print_json, say
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``bench`` to ``etp``."""
@@ -18,7 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     bench.add_argument("--repetitions", type=int, default=20, help="timed cycles per cell (default 20)")
     bench.add_argument("--grid", choices=["225", "2025"], action="append", help="only this grid (repeatable)")
     bench.add_argument("--no-peer", action="store_true", help="do not time frenetix")
-    bench.add_argument("--json", type=Path, metavar="FILE", help="also write the table as JSON")
+    bench.add_argument("--out", type=Path, metavar="FILE", help="also write the rows as JSON to FILE")
+    add_json(bench)
     bench.set_defaults(handler=_bench)
 
 
@@ -26,15 +29,19 @@ def _bench(args: argparse.Namespace) -> int:
     from benchmarks.planning_cycle import format_table, run_benchmark
 
     if args.repetitions < 1:
-        raise ValueError("--repetitions must be >= 1")
+        raise ValueError(f"--repetitions must be >= 1, got {args.repetitions}")
+    if args.out is not None:
+        output_file(args.out, "--out")  # before timing anything
     rows = run_benchmark(
         repetitions=args.repetitions,
         grids=tuple(args.grid or ("225", "2025")),
         peer=not args.no_peer,
     )
-    print(format_table(rows))
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(rows, indent=2))
-        print(f"wrote {args.json}")
+        print_json(rows)
+    else:
+        print(format_table(rows))
+    if args.out is not None:
+        args.out.write_text(json.dumps(rows, indent=2), encoding="utf-8")
+        say(args, f"wrote {args.out}")
     return 0

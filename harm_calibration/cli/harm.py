@@ -7,7 +7,6 @@ whose delta-v is 12 m/s in a side impact, by the default model (LR4S).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 from ethical_planner.geometry import wrap_angle
@@ -21,6 +20,7 @@ from ethical_planner.harm import (
     harm,
 )
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, UNPROTECTED_TYPES, RoadUserType, mass_of
+from harm_calibration.cli.common import add_json, print_json
 
 #: Named impact areas and their direction in the road user's frame [deg], + = left.
 _NAMED_AREAS_DEG = {
@@ -67,7 +67,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=EGO_MASS_KG,
         help="mass of the ego it collides with [kg], for the implied closing speed",
     )
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    add_json(parser)
     parser.set_defaults(handler=_run)
 
 
@@ -143,7 +143,7 @@ def _run(args: argparse.Namespace) -> int:
             "closing_speed_mps": closing,
             "ego_dv_mps": ego_dv,
         }
-        print(json.dumps(record))
+        print_json(record)
         return 0
     area = "" if args.area is None else f", area {args.area}"
     if args.area is not None and angle is None:

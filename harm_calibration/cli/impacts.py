@@ -2,18 +2,19 @@
 
 ``etp impacts --grid small|full --out DIR``: controlled impact sweep, resumable.
 ``etp impacts --from-runs RUNS --out DIR``: the same comparison over run collisions.
-``etp refit-harm FILE.csv [--model reduced_sym] [--json]``: logistic refit.
+``etp refit-harm FILE.csv [--model reduced_sym] [--json]``: logistic refit of crash
+records or of an ``impacts.csv``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
 from pathlib import Path
 
 from ethical_planner.harm import HarmModel
+from harm_calibration.cli.common import add_json, output_dir, print_json, show_progress
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -35,17 +36,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     impacts.add_argument("--seed", type=int, default=0, help="seed of the calibration train/test split")
     impacts.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     impacts.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_json(impacts)
     impacts.set_defaults(handler=_impacts)
 
     refit = subparsers.add_parser(
         "refit-harm",
-        help="refit a logistic harm model to crash records",
-        description="Maximum-likelihood refit from a CSV with columns dv [m/s], mais3 (0/1), "
-        "area (area models) and optional weight.",
+        help="refit a logistic harm model to crash records or to an etp impacts table",
+        description="Maximum-likelihood refit of a logistic harm model, with standard errors. "
+        "FILE is either crash records (CSV columns dv [m/s], mais3 (0/1), area for area models, "
+        "optional weight) or the impacts.csv of 'etp impacts': then each body assessed with "
+        "--model is a record whose outcome is the harm at the measured delta-v and area and "
+        "whose inputs are the planner's predicted ones (--inputs). Separable or "
+        "rank-deficient records are refused with the reason.",
     )
-    refit.add_argument("file", type=Path, help="crash records CSV")
-    refit.add_argument("--model", default=HarmModel.REDUCED_SYM.value, help="logistic harm model to refit")
-    refit.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    refit.add_argument("file", type=Path, metavar="FILE.csv", help="crash records or impacts.csv")
+    refit.add_argument(
+        "--model",
+        default=HarmModel.REDUCED_SYM.value,
+        help="logistic harm model to refit: "
+        + ", ".join(m.value for m in HarmModel if not m.value.startswith("ref_speed")),
+    )
+    refit.add_argument(
+        "--inputs",
+        choices=["predicted", "measured"],
+        default="predicted",
+        help="impacts.csv only: fit on the planner's predicted delta-v and area (default) or on the "
+        "measured ones (gives back the shipped coefficients, a check)",
+    )
+    add_json(refit)
     refit.set_defaults(handler=_refit)
 
 
@@ -55,8 +73,11 @@ def _impacts(args: argparse.Namespace) -> int:
     from harm_calibration.rows import write_rows
     from harm_calibration.sweep import GRIDS, Grid, run_sweep
 
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(args.out)
+    if args.from_runs is not None and not Path(args.from_runs).is_dir():
+        raise ValueError(f"--from-runs {args.from_runs}: no such folder")
+    if args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
     start = time.perf_counter()
     if args.from_runs is not None:
         rows = rows_from_runs(args.from_runs)
@@ -66,11 +87,12 @@ def _impacts(args: argparse.Namespace) -> int:
         title = f"Closed-loop impacts from {args.from_runs}"
     else:
         grid = Grid(args.grid or "small")
-        rows = run_sweep(
-            GRIDS[grid].cases(), out / "impacts.csv", args.workers, progress=not args.no_progress
-        )
+        rows = run_sweep(GRIDS[grid].cases(), out / "impacts.csv", args.workers, progress=show_progress(args))
         title = f"Impact sweep, {grid.value} grid"
     summary = analyse(out, rows, title, seed=args.seed, plots=not args.no_plots)
+    if args.json:
+        print_json(summary)
+        return 0
     print(headline_markdown(summary))
     if "calibration" in summary:
         before = summary["calibration"]["test_error_eq1"]["all"]
@@ -88,6 +110,9 @@ def _refit(args: argparse.Namespace) -> int:
     from harm_calibration.refit import fit_logistic, read_records
 
     model = HarmModel.parse(args.model)
-    result = fit_logistic(read_records(args.file, model), model)
-    print(json.dumps(result.to_dict(), indent=2) if args.json else result.table())
+    result = fit_logistic(read_records(args.file, model, args.inputs), model)
+    if args.json:
+        print_json(result.to_dict())
+    else:
+        print(result.table())
     return 0

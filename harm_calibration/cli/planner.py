@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 from harm_calibration.cli import harm as harm_cli
+from harm_calibration.cli.common import add_json, print_json
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -15,12 +15,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     plan = subparsers.add_parser(
         "plan",
         help="plan a few cycles of a built-in situation and print the decision records",
+        description="Open loop, no physics: the ego overtakes a cyclist with oncoming traffic "
+        "(paper Fig. 3). Each cycle prints the decision record: the validity level chosen and "
+        "why, every principle's cost, and each road user's collision probability, harm and risk.",
     )
     plan.add_argument(
         "--planner", default="ethical", help="ethical, selfish, standard or ethical_responsible"
     )
     plan.add_argument("--cycles", type=int, default=3, help="planning cycles to run (default 3)")
-    plan.add_argument("--json", action="store_true", help="print the decision records as JSON")
+    add_json(plan)
     plan.set_defaults(handler=_plan)
 
 
@@ -56,5 +59,5 @@ def _plan(args: argparse.Namespace) -> int:
         )
         users = [u.advanced(0.1) for u in users]
     if args.json:
-        print(json.dumps(records, indent=2))
+        print_json(records)
     return 0

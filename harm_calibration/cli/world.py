@@ -1,25 +1,49 @@
-"""``etp scenarios``, ``etp run`` and ``etp demo``: the closed loop from the command line."""
+"""``etp scenarios``, ``etp run`` and ``etp demo``: the closed loop from the command line.
+
+``etp run`` and ``etp demo`` write the same layout: ``--out ROOT`` holds one folder per
+run (``RunTask.run_dir``, its name is the run id) with ``summary.json`` and
+``recording.rrd``, and ``ROOT/index.jsonl``. Nothing is written outside ``ROOT``.
+"""
 
 from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 from ethical_planner.validation import check
+from harm_calibration.cli.common import (
+    add_config,
+    add_json,
+    output_dir,
+    planner_configs,
+    print_json,
+    say,
+    show_progress,
+)
 from harm_calibration.cli.process import keep_freed_memory
+
+#: Largest number of runs one ``etp demo`` accepts (``--random`` times planners times seeds).
+MAX_RUNS = 100_000
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add this layer's subcommands to ``etp``."""
-    p = subparsers.add_parser("scenarios", help="list the scenario catalog, one line each")
+    p = subparsers.add_parser(
+        "scenarios",
+        help="list the scenario catalog, one line each",
+        description="List the built-in scenario catalog: name, road layout, number of road users "
+        "and what happens. Any name can be given to 'etp run' and 'etp demo --scenarios'.",
+    )
+    add_json(p)
     p.set_defaults(handler=_scenarios)
 
     p = subparsers.add_parser(
         "run",
-        help="run one scenario in closed loop and write DIR/summary.json",
+        help="run one scenario in closed loop and write ROOT/<run id>/summary.json",
         description="Drive the ego with a planner through a MuJoCo scenario; every "
-        "collision is measured from the physics and compared with the harm model.",
+        "collision is measured from the physics and compared with the harm model. Writes "
+        "ROOT/<run id>/summary.json and recording.rrd and a row in ROOT/index.jsonl "
+        "(ROOT is --out); an existing run of the same id is replaced.",
     )
     p.add_argument(
         "scenario",
@@ -27,12 +51,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "or a scenario .toml file",
     )
     p.add_argument("--planner", default="ethical", help="ethical, selfish or standard (default ethical)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the observation noise (default 0)")
+    add_config(p)
+    p.add_argument("--seed", type=int, default=0, help="seed of the observation noise, >= 0 (default 0)")
+    p.add_argument("--out", default="logs/run", metavar="ROOT", help="output root (default logs/run)")
     p.add_argument(
-        "--out", default=None, help="output folder (default logs/run/<scenario>-<planner>-s<seed>)"
+        "--noise", type=float, default=0.0, help="position noise std [m] of observed road users, >= 0"
     )
-    p.add_argument("--noise", type=float, default=0.0, help="position noise std [m] of observed road users")
     p.add_argument("--replan-rate", type=float, default=10.0, help="planning cycles per second [Hz]")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_json(p)
     _recording_arguments(p)
     p.set_defaults(handler=_run)
 
@@ -43,11 +70,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "planners (multiprocessing), one folder per run with summary.json, an "
         "aggregate.json and a comparison table. Existing summaries are skipped (resume).",
     )
-    p.add_argument("--out", default="logs/demo", help="output folder (default logs/demo)")
+    p.add_argument("--out", default="logs/demo", metavar="ROOT", help="output root (default logs/demo)")
     p.add_argument("--quick", action="store_true", help="run a small subset of the catalog")
-    p.add_argument("--scenarios", default=None, help="comma-separated scenario names")
+    p.add_argument("--scenarios", default=None, help="comma-separated scenario names or .toml files")
     p.add_argument("--planners", default="ethical,selfish,standard", help="comma-separated presets")
-    p.add_argument("--seeds", default="0", help="comma-separated run seeds (default 0)")
+    add_config(p)
+    p.add_argument("--seeds", default="0", help="comma-separated run seeds, each >= 0 (default 0)")
     p.add_argument(
         "--random",
         type=int,
@@ -55,9 +83,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="N",
         help="instead of the catalog, run N random variants of the families (see --scenario-seed)",
     )
-    p.add_argument("--scenario-seed", type=int, default=0, help="seed of the random variants (default 0)")
+    p.add_argument(
+        "--scenario-seed", type=int, default=0, help="seed of the random variants, >= 0 (default 0)"
+    )
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_json(p)
     _recording_arguments(p)
     p.set_defaults(handler=_demo)
 
@@ -75,41 +106,92 @@ def _recording_arguments(parser: argparse.ArgumentParser) -> None:
 def _split(text: str, what: str) -> list[str]:
     items = [item.strip() for item in text.split(",") if item.strip()]
     check(bool(items), f"{what} must name at least one item")
+    twice = sorted({item for item in items if items.count(item) > 1})
+    check(not twice, f"{what} lists {', '.join(twice)} more than once")
     return items
 
 
-def _scenarios(args: argparse.Namespace) -> int:
-    from mujoco_world.scenario.catalog import catalog_names, describe
+def _non_negative(value: int, option: str) -> None:
+    check(value >= 0, f"{option} must be an integer >= 0, got {value}")
 
+
+def _scenarios(args: argparse.Namespace) -> int:
+    from mujoco_world.scenario.catalog import CATALOG, catalog_names, describe, get_scenario
+
+    if args.json:
+        entries = []
+        for name in catalog_names():
+            scenario = get_scenario(name)
+            entries.append(
+                {
+                    "name": name,
+                    "road": scenario.road.kind.value,
+                    "road_users": len(scenario.road_users),
+                    "duration": scenario.duration,
+                    "description": CATALOG[name].description,
+                }
+            )
+        print_json(entries)
+        return 0
     for name in catalog_names():
         print(describe(name))
     return 0
 
 
-def _check_planner(name: str) -> None:
-    from ethical_planner.config import preset
+def _progress_observer(label: str, enabled: bool):
+    """A ``RunObserver`` that shows a run's simulated time as a progress bar (changes nothing)."""
+    from tqdm import tqdm
 
-    preset(name)  # raises ValueError listing the presets
+    from mujoco_world.loop.runner import RunObserver
+
+    class SimulatedTime(RunObserver):
+        step_interval = 100  # every 0.1 s of simulated time
+
+        def __init__(self) -> None:
+            self.bar = None
+
+        def on_start(self, world, scenario, planner, seed) -> None:
+            self.bar = tqdm(
+                total=float(scenario.duration),
+                desc=label,
+                disable=not enabled,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s simulated [{elapsed}]",
+            )
+
+        def on_step(self, world, time) -> None:
+            self.bar.update(min(time, self.bar.total) - self.bar.n)
+
+        def on_end(self, summary) -> None:
+            self.bar.close()
+
+    return SimulatedTime()
 
 
 def _run(args: argparse.Namespace) -> int:
-    from mujoco_world.loop.batch import write_json
-    from mujoco_world.loop.runner import RunConfig, run_scenario
+    from mujoco_world.loop.batch import RunTask, write_json
+    from mujoco_world.loop.runner import ObserverGroup, RunConfig, run_scenario
     from mujoco_world.loop.world import ObservationNoise
     from mujoco_world.scenario.sources import resolve_scenario
-
-    _check_planner(args.planner)
-    scenario = resolve_scenario(args.scenario)
-    config = RunConfig(noise=ObservationNoise(position=args.noise), replan_rate=args.replan_rate)
-    out = Path(args.out) if args.out else Path("logs/run") / f"{scenario.name}-{args.planner}-s{args.seed}"
     from mujoco_world.storage.run_folder import recording_observer
 
-    observer = recording_observer(out, keep=args.keep_recordings, record=not args.no_record)
-    summary = run_scenario(scenario, args.planner, args.seed, config, observer)
-    path = out / "summary.json"
+    _non_negative(args.seed, "--seed")
+    (planner,) = planner_configs([args.planner], args.config)
+    scenario = resolve_scenario(args.scenario)
+    config = RunConfig(noise=ObservationNoise(position=args.noise), replan_rate=args.replan_rate)
+    root = output_dir(args.out)
+    task = RunTask(args.scenario, planner.name, args.seed, str(root), planner_config=planner)
+    recorder = recording_observer(
+        task.run_dir, keep=args.keep_recordings, record=not args.no_record, out_root=root
+    )
+    progress = _progress_observer(f"{scenario.name} [{planner.name}]", show_progress(args))
+    summary = run_scenario(scenario, planner, args.seed, config, ObserverGroup([recorder, progress]))
+    path = task.summary_path
     data = summary.to_dict()
-    data["recording"] = observer.row.recording if observer.row is not None else None
+    data["recording"] = recorder.row.recording if recorder.row is not None else None
     write_json(path, data)
+    if args.json:
+        print_json(data)
+        return 1 if summary.outcome == "failed" else 0
     risk = summary.max_risk
     print(
         f"{scenario.name} [{summary.planner}, seed {summary.seed}]: {summary.outcome} after "
@@ -125,9 +207,9 @@ def _run(args: argparse.Namespace) -> int:
             f"Eq. 1 {record.a.dv_predicted:.2f}/{record.b.dv_predicted:.2f} m/s; "
             f"areas {m.a.reduced_area}/{m.b.reduced_area}"
         )
-    print(f"wrote {path}")
+    print(f"wrote {path}  (run id {task.run_dir.name}, index {root / 'index.jsonl'})")
     if data["recording"]:
-        print(f"recording: {data['recording']}  (open with: rerun {data['recording']})")
+        print(f"recording: {data['recording']}  (open with: etp replay {task.run_dir.name} --root {root})")
     return 1 if summary.outcome == "failed" else 0
 
 
@@ -140,15 +222,34 @@ def _demo(args: argparse.Namespace) -> int:
         write_aggregate,
     )
     from mujoco_world.scenario.catalog import catalog_names, generated_names, get_family
+    from mujoco_world.scenario.sources import resolve_scenario
 
-    check(args.random >= 0, f"--random must be >= 0, got {args.random}")
+    _non_negative(args.random, "--random")
+    _non_negative(args.scenario_seed, "--scenario-seed")
+    check(args.workers >= 1, f"--workers must be >= 1, got {args.workers}")
     families = None
     if args.scenarios:
         scenarios = _split(args.scenarios, "--scenarios")
         for name in scenarios:
-            if not name.endswith(".toml"):
+            if name.endswith(".toml"):
+                resolve_scenario(name)  # a bad file is bad input, not a failed run
+            else:
                 get_family(name)
         families = scenarios
+    planners = planner_configs(_split(args.planners, "--planners"), args.config)
+    try:
+        seeds = [int(s) for s in _split(args.seeds, "--seeds")]
+    except ValueError as error:
+        if "more than once" in str(error) or "at least one" in str(error):
+            raise
+        raise ValueError(f"--seeds must be comma-separated integers, got {args.seeds!r}") from None
+    for seed in seeds:
+        _non_negative(seed, "--seeds")
+    runs = (args.random or 1) * len(planners) * len(seeds)
+    check(
+        runs <= MAX_RUNS,
+        f"--random x --planners x --seeds asks for {runs} runs; one batch takes at most {MAX_RUNS}",
+    )
     if args.random:
         scenarios = generated_names(args.random, args.scenario_seed, families)
     elif args.scenarios:
@@ -157,25 +258,19 @@ def _demo(args: argparse.Namespace) -> int:
         scenarios = list(QUICK_SCENARIOS)
     else:
         scenarios = catalog_names()
-    planners = _split(args.planners, "--planners")
-    for name in planners:
-        _check_planner(name)
-    try:
-        seeds = [int(s) for s in _split(args.seeds, "--seeds")]
-    except ValueError:
-        raise ValueError(f"--seeds must be comma-separated integers, got {args.seeds!r}") from None
-    check(args.workers >= 1, f"--workers must be >= 1, got {args.workers}")
-    tasks = make_tasks(
-        scenarios, planners, seeds, args.out, record=not args.no_record, keep=args.keep_recordings
-    )
+    root = output_dir(args.out)
+    tasks = make_tasks(scenarios, planners, seeds, root, record=not args.no_record, keep=args.keep_recordings)
     start = time.perf_counter()
     rows = run_batch(
-        tasks, workers=args.workers, progress=not args.no_progress, worker_initializer=keep_freed_memory
+        tasks, workers=args.workers, progress=show_progress(args), worker_initializer=keep_freed_memory
     )
     wall = time.perf_counter() - start
-    path = write_aggregate(args.out, rows, wall)
-    print(comparison_table(rows))
+    path = write_aggregate(root, rows, wall)
     skipped = sum(1 for r in rows if r.get("skipped"))
-    print(f"\n{len(rows)} runs ({skipped} resumed from existing summaries) in {wall:.1f} s; wrote {path}")
-    print(f"run index: {Path(args.out) / 'index.jsonl'}; near-crash runs: etp near-crash {args.out}")
+    if args.json:
+        print_json({"runs": rows, "wall_time": wall, "aggregate": str(path)})
+    else:
+        print(comparison_table(rows))
+    say(args, f"\n{len(rows)} runs ({skipped} resumed from existing summaries) in {wall:.1f} s; wrote {path}")
+    say(args, f"run index: {root / 'index.jsonl'}; near-crash runs: etp near-crash {root}")
     return 0

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ethical_planner.config import PlannerConfig
 from ethical_planner.validation import check
 from mujoco_world.loop.runner import GROUPS, OUTCOMES, RunConfig, run_scenario
 from mujoco_world.scenario.sources import resolve_scenario
@@ -37,9 +38,11 @@ class RunTask:
 
     Attributes:
         scenario: catalog name or path to a scenario TOML file.
-        planner: preset name.
+        planner: planner name (a preset, or ``planner_config.name``).
         seed: run seed.
         out: batch output folder.
+        record: write a Rerun recording. keep: "all" or "near_crash" recordings.
+        planner_config: the configuration to plan with; None uses the preset ``planner``.
     """
 
     scenario: str
@@ -48,6 +51,7 @@ class RunTask:
     out: str
     record: bool = True
     keep: str = "all"
+    planner_config: PlannerConfig | None = None
 
     @property
     def run_dir(self) -> Path:
@@ -123,7 +127,8 @@ def run_task(task: RunTask, config: RunConfig | None = None) -> dict[str, Any]:
     try:
         scenario = resolve_scenario(task.scenario)
         observer = recording_observer(task.run_dir, keep=task.keep, record=task.record, out_root=task.out)
-        summary = run_scenario(scenario, task.planner, task.seed, config, observer).to_dict()
+        planner = task.planner_config if task.planner_config is not None else task.planner
+        summary = run_scenario(scenario, planner, task.seed, config, observer).to_dict()
         summary["recording"] = observer.row.recording if observer.row is not None else None
     except Exception as error:  # noqa: BLE001 - recorded, the batch goes on
         summary = failed_summary(task, f"{type(error).__name__}: {error}")
@@ -137,18 +142,22 @@ def _run_task_in_worker(task: RunTask, config: RunConfig | None) -> dict[str, An
 
 def make_tasks(
     scenarios: Sequence[str],
-    planners: Sequence[str],
+    planners: Sequence[str | PlannerConfig],
     seeds: Sequence[int],
     out: str | Path,
     record: bool = True,
     keep: str = "all",
 ) -> list[RunTask]:
-    """All combinations, scenario-major; ``record``/``keep`` as in ``recording_observer``."""
+    """All combinations, scenario-major; ``record``/``keep`` as in ``recording_observer``.
+
+    ``planners`` are preset names or configurations (run under their ``name``).
+    """
+    named = [(p, None) if isinstance(p, str) else (p.name, p) for p in planners]
     return [
-        RunTask(s, p, int(seed), str(out), record, keep)
+        RunTask(s, name, int(seed), str(out), record, keep, config)
         for s in scenarios
         for seed in seeds
-        for p in planners
+        for name, config in named
     ]
 
 

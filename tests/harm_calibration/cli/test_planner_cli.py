@@ -22,7 +22,7 @@ def test_plan_unknown_preset_is_a_clear_error(capsys):
 
 def test_bench_small_grid_writes_json(tmp_path, capsys):
     out = tmp_path / "bench.json"
-    assert main(["bench", "--grid", "225", "--repetitions", "1", "--no-peer", "--json", str(out)]) == 0
+    assert main(["bench", "--grid", "225", "--repetitions", "1", "--no-peer", "--out", str(out)]) == 0
     rows = json.loads(out.read_text())
     assert [r["road_users"] for r in rows] == [0, 5, 20]
     assert all(r["n_trajectories"] == 225 and r["ours_median_ms"] > 0 for r in rows)

@@ -6,6 +6,7 @@ from harm_calibration.cli import main
 from mujoco_world.loop.batch import RunTask, comparison_table, run_batch
 from mujoco_world.loop.runner import run_scenario
 from mujoco_world.scenario.catalog import catalog_names, get_scenario
+from tests.harm_calibration.cli.conftest import write_scenario
 
 
 def test_scenarios_lists_the_catalog(capsys):
@@ -16,21 +17,21 @@ def test_scenarios_lists_the_catalog(capsys):
 
 
 def test_run_writes_a_summary(tmp_path, capsys):
+    scenario = write_scenario(tmp_path, duration=3.0)  # a head-on crash of two others at ~1.8 s
     out = tmp_path / "run"
-    code = main(["run", "oncoming_drift", "--planner", "standard", "--seed", "4", "--out", str(out)])
+    code = main(["run", scenario, "--planner", "standard", "--seed", "4", "--out", str(out)])
     assert code == 0
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["scenario"] == "oncoming_drift"
+    summary = json.loads((out / "short__standard__s4" / "summary.json").read_text())
+    assert summary["scenario"] == "short"
     assert summary["planner"] == "standard" and summary["seed"] == 4
-    assert summary["outcome"] in ("goal", "timeout", "crash")
+    assert summary["outcome"] == "crash" and not summary["ego_collided"]
     for key in ("duration", "collisions", "max_risk", "min_distance", "timings", "tracking_rms"):
         assert key in summary
-    if summary["collisions"]:
-        collision = summary["collisions"][0]
-        assert {"measurement", "comparison"} <= set(collision)
-        assert {"dv_measured", "dv_predicted", "harm_measured", "harm_predicted"} <= set(
-            collision["comparison"]["a"]
-        )
+    collision = summary["collisions"][0]
+    assert {"measurement", "comparison"} <= set(collision)
+    assert {"dv_measured", "dv_predicted", "harm_measured", "harm_predicted"} <= set(
+        collision["comparison"]["a"]
+    )
     assert "wrote" in capsys.readouterr().out
 
 

@@ -1,0 +1,191 @@
+"""What every ``etp`` command shares: output folders, JSON output, progress, planner configs.
+
+* ``--out``: ``output_dir`` creates the folder and writes a probe file into it before
+  any simulation, so a read-only, full or misnamed folder fails at once (exit 2).
+* ``--json``: ``print_json`` prints one JSON document to stdout instead of the
+  human-readable text (non-finite numbers become null); messages go to stderr.
+* progress bars: ``show_progress`` is false with ``--no-progress`` or when stderr is
+  not a terminal.
+* ``--config FILE.toml``: ``planner_configs`` turns preset names and a planner TOML
+  into the configurations that ``etp run`` and ``etp demo`` run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+#: Bytes written by the probe of an output folder (a full disk fails here, not after a run).
+PROBE_BYTES = 64 * 1024
+
+
+def output_dir(path: str | Path, option: str = "--out") -> Path:
+    """Create ``path`` if needed and check that files can be written into it.
+
+    Args:
+        path: the output folder.
+        option: the command-line option that named it (for messages).
+
+    Returns:
+        The folder.
+
+    Raises:
+        ValueError: ``path`` is a file, cannot be created, or cannot take a file of
+            ``PROBE_BYTES`` (read-only, full disk); the message names ``option``.
+    """
+    folder = Path(path)
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"{option} {folder} is a file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise ValueError(f"{option} {folder}: cannot create the folder: {error.strerror}") from None
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".etp-probe-") as probe:
+            probe.write(b"\0" * PROBE_BYTES)
+            probe.flush()
+            os.fsync(probe.fileno())
+    except OSError as error:
+        raise ValueError(f"{option} {folder} is not writable: {error.strerror}") from None
+    return folder
+
+
+def output_file(path: str | Path, option: str) -> Path:
+    """Check that ``path`` can be written (its folder is created and probed).
+
+    Raises:
+        ValueError: ``path`` is a folder or its folder is not writable.
+    """
+    file = Path(path)
+    if file.is_dir():
+        raise ValueError(f"{option} {file} is a folder, not a file")
+    output_dir(file.parent, option)
+    return file
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if hasattr(value, "tolist"):  # numpy arrays and scalars
+        return _plain(value.tolist())
+    return value
+
+
+def print_json(data: Any) -> None:
+    """Print ``data`` as one JSON document on stdout (non-finite numbers as null)."""
+    print(json.dumps(_plain(data), indent=2, allow_nan=False))
+
+
+def say(args: argparse.Namespace, message: str) -> None:
+    """Print a human-readable message: stdout normally, stderr under ``--json``."""
+    print(message, file=sys.stderr if getattr(args, "json", False) else sys.stdout)
+
+
+def show_progress(args: argparse.Namespace) -> bool:
+    """True unless ``--no-progress`` was given or stderr is not a terminal."""
+    return not getattr(args, "no_progress", False) and sys.stderr.isatty()
+
+
+def add_json(parser: argparse.ArgumentParser) -> None:
+    """The ``--json`` flag, with the same meaning on every command."""
+    parser.add_argument(
+        "--json", action="store_true", help="print the result as JSON on stdout instead of text"
+    )
+
+
+def add_config(parser: argparse.ArgumentParser) -> None:
+    """The ``--config FILE.toml`` option of the commands that run planners."""
+    parser.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        metavar="FILE.toml",
+        help="planner TOML: overrides applied on top of each planner preset (see the README); "
+        "relative paths in it are relative to the file",
+    )
+
+
+def planner_configs(names: Sequence[str], config: Path | None) -> list:
+    """Planner configurations for preset ``names`` with the overrides of ``config`` applied.
+
+    Without ``config`` the presets themselves. With it, each preset gets the file's
+    overrides and is named ``<preset>+<file stem>`` unless the file sets ``name`` (a
+    file's ``preset`` key is allowed when one planner is asked for and chooses it).
+    A ``risk.delta_v_correction`` path is resolved against the file's folder and
+    loaded once here, so that a bad calibration file fails before any simulation.
+
+    Raises:
+        ValueError: an unknown preset, or a config file that cannot be read or holds
+            an invalid value; the message names the file and the key.
+    """
+    import dataclasses
+    import tomllib
+
+    from ethical_planner.config import load_config, preset
+    from ethical_planner.dv_correction import DeltaVCorrection
+
+    if config is None:
+        return [preset(name) for name in names]
+    try:
+        with open(config, "rb") as handle:
+            keys = tomllib.load(handle)
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+        keys = None  # load_config below names the file and the problem
+    if keys is not None and "preset" in keys and len(names) > 1:
+        raise ValueError(
+            f"--config {config}: the key 'preset' chooses one planner, but {len(names)} are asked "
+            "for (--planners); remove the key to apply the file to each of them"
+        )
+    configs = []
+    for name in names:
+        try:
+            loaded = load_config(config, base=name)
+        except OSError as error:
+            raise ValueError(f"--config {config}: cannot read: {error.strerror}") from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+            raise ValueError(f"--config {config}: not valid TOML: {error}") from None
+        except ValueError as error:
+            message = str(error)
+            raise ValueError(message if str(config) in message else f"--config {config}: {message}") from None
+        if keys is not None and "name" not in keys:
+            loaded = dataclasses.replace(loaded, name=f"{loaded.name}+{Path(config).stem}")
+        correction = loaded.risk.delta_v_correction
+        if correction is not None and not Path(correction).is_absolute():
+            resolved = str(Path(config).parent / correction)
+            loaded = dataclasses.replace(
+                loaded, risk=dataclasses.replace(loaded.risk, delta_v_correction=resolved)
+            )
+        configs.append(loaded)
+    for planner in configs:
+        _check_planner_name(planner.name, config)
+    path = configs[0].risk.delta_v_correction
+    if path is not None:
+        try:
+            DeltaVCorrection.load(path)
+        except OSError as error:
+            raise ValueError(
+                f"--config {config}: risk.delta_v_correction: cannot read {path}: {error.strerror}"
+            ) from None
+        except ValueError as error:
+            raise ValueError(f"--config {config}: risk.delta_v_correction {path}: {error}") from None
+    return configs
+
+
+def _check_planner_name(name: str, config: Path) -> None:
+    """A planner name becomes part of run folders: letters, digits and _ - + . only."""
+    if not name or not all(c.isalnum() or c in "_-+." for c in name):
+        raise ValueError(
+            f"--config {config}: name must consist of letters, digits and _ - + . (it names run "
+            f"folders), got {name!r}"
+        )
