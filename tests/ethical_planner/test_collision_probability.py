@@ -582,8 +582,9 @@ def test_drivable_area_shortcut_matches_the_corner_test():
     # risk.outside_drivable_area tests only candidates near the road edge corner by
     # corner (the others lie deep inside the eroded area); it must agree with testing
     # every corner, on a curved road with candidates hugging and crossing its edges.
+    # The corners are written out here (centre +- half length along the heading +- half
+    # width across it), independent of the planner's geometry helpers.
     from ethical_planner.environment import RoadEnvironment
-    from ethical_planner.geometry import rectangle_corners
     from ethical_planner.risk import outside_drivable_area
     from ethical_planner.road_users import Shape
 
@@ -602,9 +603,12 @@ def test_drivable_area_shortcut_matches_the_corner_test():
 
     poses = _Poses()
     poses.x, poses.y, poses.yaw = x, y, yaw
-    shape = Shape(4.5, 1.8)
-    cx, cy = rectangle_corners(x, y, yaw, shape.length, shape.width)
-    brute = ~np.all(shapely.contains_xy(env.drivable_area, cx, cy), axis=-1)
-    fast = outside_drivable_area(poses, shape, env)
-    assert 0.1 < brute.mean() < 0.9
-    np.testing.assert_array_equal(fast, brute)
+    half_l, half_w = 4.5 / 2, 1.8 / 2
+    outside = np.zeros(s.shape, dtype=bool)
+    for along, across in ((1, 1), (1, -1), (-1, -1), (-1, 1)):
+        cx = x + along * half_l * np.cos(yaw) - across * half_w * np.sin(yaw)
+        cy = y + along * half_l * np.sin(yaw) + across * half_w * np.cos(yaw)
+        outside |= ~shapely.contains_xy(env.drivable_area, cx, cy)
+    fast = outside_drivable_area(poses, Shape(4.5, 1.8), env)
+    assert 0.1 < outside.mean() < 0.9
+    np.testing.assert_array_equal(fast, outside)

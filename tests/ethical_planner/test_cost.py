@@ -138,3 +138,38 @@ def test_leaving_the_road_adds_the_egos_road_edge_risk_to_its_set():
     assert present.sum() == 3
     assert bayes(risks, present)[0] == pytest.approx(0.02)
     assert equality(risks, present)[0] == pytest.approx((0.0 + 0.06 + 0.06) / 3)
+
+
+@pytest.mark.parametrize(
+    ("weights", "j_risk"),
+    [
+        # S_R = (0.1, 0.3): J_B = 0.2, J_E = |0.1 - 0.3| = 0.2, J_M = max harm 0.5 (gamma 1),
+        # J_R = (0.5 * 0.1 + 0 * 0.3) / 2 = 0.025, R_ego = 0.2
+        ({"bayes": 1.0}, 0.2),
+        ({"equality": 1.0}, 0.2),
+        ({"maximin": 1.0}, 0.5),
+        ({"bayes": 1.0, "responsibility": 1.0}, 0.2 - 0.025),
+        ({"bayes": 2.0, "responsibility": 0.5}, 2 * 0.2 - 0.5 * 2 * 0.025),
+        ({"ego_risk": 1.0}, 0.2),
+    ],
+)
+def test_each_principle_enters_eq7_with_its_sign(weights, j_risk):
+    zero = {"bayes": 0.0, "equality": 0.0, "maximin": 0.0, "responsibility": 0.0, "ego_risk": 0.0}
+    w = CostWeights(**(zero | weights | {"risk": 2.0, "maximin_gamma": 1.0, "jerk_lon": 1.0, "speed": 2.0}))
+    costs = total_cost(
+        np.array([[0.1, 0.3], [0.1, 0.3]]),
+        np.ones((2, 2), dtype=bool),
+        np.array([[0.5, 0.0], [0.5, 0.0]]),
+        np.array([[0.5, 0.2], [0.5, 0.2]]),
+        np.ones((2, 2), dtype=bool),
+        np.array([0.2, 0.2]),
+        np.array([3.0, 3.0]),
+        np.zeros(2),
+        np.array([1.5, 1.5]),
+        np.zeros(2),
+        np.array([Validity.VALID, Validity.LEAVES_ROAD]),
+        w,
+    )
+    assert costs.risk[0] == pytest.approx(j_risk)
+    assert costs.total[0] == pytest.approx(2.0 * j_risk + 3.0 + 2.0 * 1.5)  # Eq. 5
+    assert costs.total[1] == pytest.approx(j_risk)  # Eq. 6: risk only below the valid level

@@ -28,10 +28,16 @@ def test_covariance_grows_and_is_aligned_with_heading():
     times = np.linspace(0, 2, 21)
     config = PredictionConfig(covariance_floor=1e-6)
     pred = predict_constant_turn_rate([_car(KinematicState(0, 0, math.pi / 2, 10))], times, config)
-    sigma_long = config.sigma0_long + (config.growth_long + config.growth_long_per_speed * 10) * times
-    np.testing.assert_allclose(pred.cov[0, :, 1, 1], sigma_long**2)
+    # defaults: sigma_long = 0.3 + (0.3 + 0.05 * 10 m/s) t, sigma_lat = 0.2 + 0.25 t [m];
+    # heading north, so the longitudinal variance is the y variance
+    at = [0, 10, 20]  # t = 0, 1, 2 s
+    np.testing.assert_allclose(pred.cov[0, at, 1, 1], [0.3**2, 1.1**2, 1.9**2])
+    np.testing.assert_allclose(pred.cov[0, at, 0, 0], [0.2**2, 0.45**2, 0.7**2])
     np.testing.assert_allclose(pred.cov[0, :, 0, 1], 0, atol=1e-12)
     assert np.all(np.diff(np.linalg.det(pred.cov[0])) > 0)
+    # heading 45 deg: R diag(l^2, w^2) R^T has off-diagonal (l^2 - w^2) / 2 = (3.61 - 0.49) / 2
+    diagonal = predict_constant_turn_rate([_car(KinematicState(0, 0, math.pi / 4, 10))], times, config)
+    np.testing.assert_allclose(diagonal.cov[0, 20], [[2.05, 1.56], [1.56, 2.05]])
 
 
 def test_covariance_floor_replaces_zero_covariance():

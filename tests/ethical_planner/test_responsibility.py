@@ -78,9 +78,10 @@ def test_rear_end_follower_is_responsible():
     planner = Planner(preset("standard"), env)
     ahead = planner.plan(KinematicState(0, 0, 0, 12.0), [slow_ahead]).road_users[0]
     behind = planner.plan(KinematicState(0, 0, 0, 3.0), [fast_behind]).road_users[0]
-    base_car = float(base_responsibility(np.array(slow_ahead.mass), np.array(True), CONFIG))
-    base_ego = float(base_responsibility(np.array(1475.0), np.array(True), CONFIG))
+    # r_base = 0.1 (1 - exp(-m / 5000 kg)); a 4.5 m x 1.8 m car weighs
+    # -1333.5 + 526.9 * 8.1^0.8 = 1475.27 kg (SPEC), the ego 1475 kg
+    base_car, base_ego = 0.0255509, 0.0255468
     assert ahead.collision_probability > 0 and behind.collision_probability > 0
-    assert ahead.ego_responsibility == pytest.approx(base_ego + CONFIG.rear_end)
-    assert ahead.responsibility == pytest.approx(base_car)
-    assert behind.responsibility == pytest.approx(base_car + CONFIG.rear_end)
+    assert ahead.ego_responsibility == pytest.approx(base_ego + 0.3, abs=1e-7)  # rear_end = 0.3
+    assert ahead.responsibility == pytest.approx(base_car, abs=1e-7)
+    assert behind.responsibility == pytest.approx(base_car + 0.3, abs=1e-7)

@@ -16,8 +16,12 @@ from ethical_planner.road_users import (
 
 
 def test_car_mass_regression_and_floor():
-    assert mass_of(RoadUserType.CAR, 4.508, 1.610) == pytest.approx(-1333.5 + 526.9 * (4.508 * 1.610) ** 0.8)
-    assert mass_of(RoadUserType.CAR, 1.5, 1.0) == MIN_CAR_MASS_KG
+    # -1333.5 + 526.9 (l w)^0.8 by hand: 4.508 x 1.610 m = 7.25788 m^2, ^0.8 = 4.88266;
+    # the catalog's 5.5 x 2.1 m van: 11.55 m^2, ^0.8 = 7.07053
+    assert mass_of(RoadUserType.CAR, 4.508, 1.610) == pytest.approx(1239.12, abs=0.01)
+    assert mass_of(RoadUserType.CAR, 5.5, 2.1) == pytest.approx(2397.23, abs=0.01)
+    assert mass_of(RoadUserType.CAR, 1.5, 1.0) == 500.0  # below 3.19 m^2 the regression is < 0: floor
+    assert MIN_CAR_MASS_KG == 500.0
     assert mass_of(RoadUserType.TRUCK, 10, 2.5) == 25000
     assert mass_of(RoadUserType.PEDESTRIAN, 0.5, 0.5) == 75
 

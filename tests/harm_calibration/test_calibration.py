@@ -28,10 +28,6 @@ EDGES = (0.0, 60.0, 120.0, 180.0)
 OFFSETS = (0.0, 0.25, 1.0)
 
 
-def test_reexports_the_planner_class():
-    assert DeltaVCorrection is PlannerCorrection
-
-
 def synthetic(n, rng):
     """Ratio measured / Eq. 1 driven by the offset (glancing hits fall short), a little by angle."""
     angle = rng.uniform(0, 180, n)
@@ -48,6 +44,25 @@ def test_fit_recovers_factors_per_angle_and_offset_bin():
     corr = fit_delta_v_correction(pred, meas, angle, off, EDGES, OFFSETS)
     np.testing.assert_allclose(corr.factors, [[1.1, 0.4], [1.0, 0.4], [1.0, 0.6]], rtol=0.01)
     assert sum(map(sum, corr.n_train)) == 3000
+
+
+def test_a_saved_calibration_corrects_the_planners_delta_v(tmp_path):
+    # Fitted here, written as calibration.json, read by the planner through its config:
+    # the planner scales Eq. 1 by the synthetic truth of the bin (0.4 for a glancing
+    # 100 deg impact, 1.1 for a central 30 deg one).
+    from ethical_planner.config import preset
+    from ethical_planner.planner import Planner
+    from ethical_planner.situations import overtaking_cyclist
+
+    pred, meas, angle, off, _, _ = synthetic(3000, np.random.default_rng(1))
+    fit_delta_v_correction(pred, meas, angle, off, EDGES, OFFSETS).save(tmp_path / "calibration.json")
+    config = preset("ethical").with_overrides(
+        {"risk": {"delta_v_correction": str(tmp_path / "calibration.json")}}
+    )
+    planner = Planner(config, overtaking_cyclist().environment)
+    assert isinstance(planner.dv_correction, PlannerCorrection)
+    corrected = planner.dv_correction([10.0, 10.0], np.radians([100.0, 30.0]), [0.5, 0.1])
+    np.testing.assert_allclose(corrected, [4.0, 11.0], rtol=0.01)
 
 
 def test_sparse_bins_fall_back_to_angle_only_then_one():

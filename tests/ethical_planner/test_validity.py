@@ -1,0 +1,162 @@
+"""Validity levels (SPEC section 4): every limit and every level, by hand and in the planner.
+
+Each rule has a test that fails when the rule is removed (``tests/mutation_check.py``
+applies those mutants and runs these tests).
+"""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from ethical_planner.config import VehicleLimits, preset
+from ethical_planner.environment import RoadEnvironment
+from ethical_planner.planner import Planner
+from ethical_planner.road_users import KinematicState
+from ethical_planner.validity import Validity, physically_invalid, validity_levels
+
+LIMITS = VehicleLimits(v_max=30.0, a_max=5.0, a_min=-9.0, kappa_max=0.2, kappa_check_speed=1.0)
+
+
+def _candidates(rows):
+    """Candidates of three steps from per-row (v [m/s], a [m/s^2], kappa [1/m], s_dot [m/s]) at step 1."""
+    n = len(rows)
+    v = np.full((n, 3), 10.0)
+    a = np.zeros((n, 3))
+    kappa = np.zeros((n, 3))
+    s_dot = np.full((n, 3), 10.0)
+    for i, (vi, ai, ki, si) in enumerate(rows):
+        v[i, 1], a[i, 1], kappa[i, 1], s_dot[i, 1] = vi, ai, ki, si
+    return SimpleNamespace(v=v, a=a, kappa=kappa, s_dot=s_dot)
+
+
+#: (row, the limits it breaks): each just inside or just beyond one limit of LIMITS.
+ROWS = [
+    ((10.0, 0.0, 0.0, 10.0), set()),
+    ((29.9, 4.9, 0.19, 29.9), set()),  # everything just inside
+    ((30.1, 0.0, 0.0, 30.1), {"speed"}),
+    ((10.0, 5.1, 0.0, 10.0), {"acceleration"}),  # longitudinal acceleration above a_max
+    ((10.0, -9.1, 0.0, 10.0), {"acceleration"}),  # braking harder than a_min
+    ((10.0, -8.9, 0.0, 10.0), set()),
+    ((10.0, 0.0, 0.21, 10.0), {"curvature"}),
+    ((10.0, 0.0, -0.21, 10.0), {"curvature"}),  # either direction
+    ((0.5, 0.0, 0.5, 0.5), set()),  # tight curvature at walking pace is not checked
+    ((1.5, 0.0, 0.5, 1.5), {"curvature"}),
+    ((3.0, 0.0, 0.0, -0.1), {"speed"}),  # reversing along the path
+    ((3.0, 0.0, 0.0, -0.04), set()),  # within the reversing tolerance
+]
+
+
+def test_each_limit_of_level_0_by_hand():
+    reasons = physically_invalid(_candidates([r for r, _ in ROWS]), LIMITS)
+    assert set(reasons) == {"speed", "acceleration", "curvature"}
+    for i, (_, broken) in enumerate(ROWS):
+        assert {name for name, flags in reasons.items() if flags[i]} == broken, ROWS[i]
+
+
+def _levels(**override):
+    """Seven candidates, one road user, two steps; ``override`` replaces an input."""
+    n = 7
+    inputs = {
+        "invalid_reasons": {"speed": np.zeros(n, bool), "acceleration": np.zeros(n, bool)},
+        "mean_overlap": np.zeros((n, 1, 2), bool),
+        "outside_road": np.zeros((n, 2), bool),
+        "risk_obs": np.zeros((n, 1)),
+        "ego_combined": np.zeros(n),
+        "max_acceptable_risk": 0.05,
+    }
+    # candidate 1: a road user's risk above R_max; 2: the ego's; 3: leaves the road
+    # (and too risky); 4: hits a predicted mean (and leaves the road, too risky);
+    # 5: physically invalid (and everything else); 6: risks exactly at R_max.
+    inputs["risk_obs"][[1, 3, 4, 5]] = 0.06
+    inputs["ego_combined"][[2, 3, 4, 5]] = 0.07
+    inputs["risk_obs"][6], inputs["ego_combined"][6] = 0.05, 0.05
+    inputs["outside_road"][[3, 4, 5], 1] = True
+    inputs["mean_overlap"][[4, 5], 0, 1] = True
+    inputs["invalid_reasons"]["acceleration"][5] = True
+    inputs.update(override)
+    return validity_levels(**inputs)
+
+
+def test_every_level_and_their_order_by_hand():
+    np.testing.assert_array_equal(_levels(), [10, 3, 3, 2, 1, 0, 10])
+
+
+def test_each_reason_alone_makes_a_candidate_physically_invalid():
+    for reason in ("speed", "acceleration"):
+        flags = {"speed": np.zeros(7, bool), "acceleration": np.zeros(7, bool)}
+        flags[reason][0] = True
+        assert _levels(invalid_reasons=flags)[0] == Validity.PHYSICALLY_INVALID
+
+
+# ----------------------------------------------------------------- in the planner, closed form
+
+STRAIGHT = RoadEnvironment.along_path([[-30.0, 0.0], [400.0, 0.0]], lanes_left=1)
+
+
+def _plan(overrides, ego):
+    # no comfort term: mobility alone pulls the plan towards the limits
+    config = preset("standard").with_overrides({"weights": {"jerk_lon": 0.0, "jerk_lat": 0.0}})
+    config = config.with_overrides(overrides)
+    return Planner(config, STRAIGHT).plan(ego, [])
+
+
+def test_planner_never_accelerates_beyond_a_max():
+    # From rest, end speeds up to 12 m/s^2 x 2 s = 24 m/s: a quartic s(t) with zero end
+    # acceleration peaks at 1.5 v_end / T, beyond a_max = 5 for v_end > 6.7 m/s.
+    decision = _plan(
+        {"desired_speed": 30.0, "sampling": {"max_end_acceleration": 12.0}}, KinematicState(0, 0, 0, 0.0)
+    )
+    assert decision.level == Validity.VALID
+    assert decision.level_counts[int(Validity.PHYSICALLY_INVALID)] > 0
+    assert decision.trajectory.a.max() <= 5.0 + 1e-9
+    assert decision.trajectory.v[-1] > 5.0  # it still accelerates as hard as allowed
+
+
+def test_planner_never_brakes_harder_than_a_min():
+    decision = _plan(
+        {"desired_speed": 0.0, "sampling": {"max_end_deceleration": 12.0}, "vehicle": {"a_min": -4.0}},
+        KinematicState(0, 0, 0, 20.0),
+    )
+    assert decision.level == Validity.VALID
+    assert decision.level_counts[int(Validity.PHYSICALLY_INVALID)] > 0
+    assert decision.trajectory.a.min() >= -4.0 - 1e-9
+    assert decision.trajectory.v[-1] < 17.0  # it still brakes
+
+
+def test_planner_never_exceeds_v_max():
+    decision = _plan(
+        {"desired_speed": 40.0, "sampling": {"max_end_acceleration": 2.0}, "vehicle": {"v_max": 30.0}},
+        KinematicState(0, 0, 0, 28.0),
+    )
+    assert decision.level_counts[int(Validity.PHYSICALLY_INVALID)] > 0
+    assert decision.trajectory.v.max() <= 30.0 + 1e-9
+    assert decision.trajectory.v[-1] > 29.0
+
+
+def test_planner_never_exceeds_kappa_max():
+    # 3 m off the reference path, with a heavy weight on returning: sharp returns bend
+    # beyond kappa_max = 0.02 1/m at 10 m/s and must be refused.
+    decision = _plan(
+        {"vehicle": {"kappa_max": 0.02}, "weights": {"path_distance": 100.0}},
+        KinematicState(0, 3.0, 0, 10.0),
+    )
+    assert decision.level == Validity.VALID
+    assert decision.level_counts[int(Validity.PHYSICALLY_INVALID)] > 0
+    assert np.abs(decision.trajectory.kappa).max() <= 0.02 + 1e-9
+    assert abs(decision.trajectory.y[-1]) < 3.0  # it still heads back
+
+
+@pytest.mark.parametrize("limit", ["a_max", "v_max", "kappa_max"])
+def test_without_the_limit_the_planner_would_break_it(limit):
+    """The three planner tests above are not vacuous: with a loose limit the same plan breaks it."""
+    loose = {"a_max": 50.0, "v_max": 100.0, "kappa_max": 5.0}[limit]
+    cases = {
+        "a_max": ({"desired_speed": 30.0, "sampling": {"max_end_acceleration": 12.0}}, (0, 0.0), "a", 5.0),
+        "v_max": ({"desired_speed": 40.0, "sampling": {"max_end_acceleration": 2.0}}, (0, 28.0), "v", 30.0),
+        "kappa_max": ({"weights": {"path_distance": 100.0}}, (3.0, 10.0), "kappa", 0.02),
+    }
+    overrides, (y, v), field, bound = cases[limit]
+    overrides = overrides | {"vehicle": {limit: loose}}
+    decision = _plan(overrides, KinematicState(0, y, 0, v))
+    assert np.abs(getattr(decision.trajectory, field)).max() > bound

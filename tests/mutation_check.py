@@ -1,0 +1,219 @@
+"""Apply each mutant of a planner rule to a scratch copy and check that a test goes red.
+
+Run from the repository root (not collected by pytest)::
+
+    python tests/mutation_check.py            # every mutant
+    python tests/mutation_check.py accel_max  # the named ones
+
+Each mutant replaces one exact piece of source (it must occur exactly once; a mutant
+whose text is gone after a refactor is reported as ``stale``, so update it here) in a
+copy of the repository under a temporary folder, then runs the tests named for it from
+inside that copy (the copy wins over the editable install). A mutant is ``killed``
+when at least one of those tests fails; the script exits 1 if any mutant survives.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+VALIDITY = "ethical_planner/validity.py"
+COST = "ethical_planner/cost.py"
+TEST_VALIDITY = "tests/ethical_planner/test_validity.py"
+TEST_COST = "tests/ethical_planner/test_cost.py"
+TEST_PLANNER = "tests/ethical_planner/test_planner.py"
+
+
+@dataclass(frozen=True)
+class Mutant:
+    """One change of one rule: ``old`` becomes ``new`` in ``path``; ``tests`` should catch it."""
+
+    name: str
+    path: str
+    old: str
+    new: str
+    tests: tuple[str, ...]
+
+
+MUTANTS = (
+    # --- validity level 0: each limit removed
+    Mutant(
+        "accel_removed",
+        VALIDITY,
+        '"acceleration": np.any((candidates.a > limits.a_max) | (candidates.a < limits.a_min), axis=1),',
+        "",
+        (TEST_VALIDITY,),
+    ),
+    Mutant("accel_max", VALIDITY, "(candidates.a > limits.a_max) | ", "", (TEST_VALIDITY,)),
+    Mutant("accel_min", VALIDITY, " | (candidates.a < limits.a_min)", "", (TEST_VALIDITY,)),
+    Mutant(
+        "speed_max", VALIDITY, "np.any(candidates.v > limits.v_max, axis=1)\n        | ", "", (TEST_VALIDITY,)
+    ),
+    Mutant(
+        "reversing",
+        VALIDITY,
+        "\n        | np.any(candidates.s_dot < -_REVERSE_TOLERANCE, axis=1)",
+        "",
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "curvature_removed",
+        VALIDITY,
+        '"curvature": np.any(',
+        '"curvature": False & np.any(',
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "curvature_gate",
+        VALIDITY,
+        " & (candidates.v > limits.kappa_check_speed)",
+        "",
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "curvature_sign",
+        VALIDITY,
+        "np.abs(candidates.kappa) > limits.kappa_max",
+        "candidates.kappa > limits.kappa_max",
+        (TEST_VALIDITY,),
+    ),
+    # --- each validity level removed, and the order of levels
+    Mutant(
+        "level_0",
+        VALIDITY,
+        "level[invalid] = Validity.PHYSICALLY_INVALID",
+        "pass",
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "level_1",
+        VALIDITY,
+        "level[np.any(mean_overlap, axis=(1, 2))] = Validity.COLLISION",
+        "pass",
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "level_2",
+        VALIDITY,
+        "level[np.any(outside_road, axis=1)] = Validity.LEAVES_ROAD",
+        "pass",
+        (TEST_VALIDITY,),
+    ),
+    Mutant("level_3", VALIDITY, "level[too_risky] = Validity.ABOVE_MAX_RISK", "pass", (TEST_VALIDITY,)),
+    Mutant(
+        "level_3_ego",
+        VALIDITY,
+        "(ego_combined > max_acceptable_risk) | ",
+        "",
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "level_3_others",
+        VALIDITY,
+        " | np.any(risk_obs > max_acceptable_risk, axis=1)",
+        "",
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "level_3_boundary",
+        VALIDITY,
+        "(ego_combined > max_acceptable_risk)",
+        "(ego_combined >= max_acceptable_risk)",
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "level_order",
+        VALIDITY,
+        "    level[np.any(outside_road, axis=1)] = Validity.LEAVES_ROAD\n"
+        "    level[np.any(mean_overlap, axis=(1, 2))] = Validity.COLLISION\n",
+        "    level[np.any(mean_overlap, axis=(1, 2))] = Validity.COLLISION\n"
+        "    level[np.any(outside_road, axis=1)] = Validity.LEAVES_ROAD\n",
+        (TEST_VALIDITY,),
+    ),
+    # --- each principle's sign in Eq. 7, and Eqs. 5 / 6
+    Mutant("sign_bayes", COST, "weights.bayes * j_b\n", "-weights.bayes * j_b\n", (TEST_COST,)),
+    Mutant("sign_equality", COST, "+ weights.equality * j_e", "- weights.equality * j_e", (TEST_COST,)),
+    Mutant("sign_maximin", COST, "+ weights.maximin * j_m", "- weights.maximin * j_m", (TEST_COST,)),
+    Mutant(
+        "sign_responsibility",
+        COST,
+        "- weights.responsibility * weights.bayes * j_r",
+        "+ weights.responsibility * weights.bayes * j_r",
+        (TEST_COST,),
+    ),
+    Mutant(
+        "sign_ego_risk",
+        COST,
+        "+ weights.ego_risk * ego_combined",
+        "- weights.ego_risk * ego_combined",
+        (TEST_COST,),
+    ),
+    Mutant(
+        "eq6_below_valid",
+        COST,
+        "np.where(valid, weights.risk * j_risk + comfort + mobility, j_risk)",
+        "weights.risk * j_risk + comfort + mobility",
+        (TEST_COST,),
+    ),
+)
+
+
+def _copy_repository(target: Path) -> None:
+    files = subprocess.run(
+        ["git", "ls-files", "--cached", "--others", "--exclude-standard"],
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.split()
+    for name in files:
+        source = ROOT / name
+        if source.is_file():
+            (target / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(source, target / name)
+
+
+def run(mutants: tuple[Mutant, ...]) -> int:
+    """Apply each mutant in turn to a scratch copy, run its tests; return the survivors' count."""
+    survivors = 0
+    with tempfile.TemporaryDirectory(prefix="etp-mutants-") as scratch:
+        copy = Path(scratch)
+        _copy_repository(copy)
+        for mutant in mutants:
+            path = copy / mutant.path
+            original = path.read_text(encoding="utf-8")
+            if original.count(mutant.old) != 1:
+                print(f"{mutant.name:<22} stale (text found {original.count(mutant.old)} times)")
+                survivors += 1
+                continue
+            path.write_text(original.replace(mutant.old, mutant.new), encoding="utf-8")
+            start = time.perf_counter()
+            result = subprocess.run(
+                [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *mutant.tests],
+                cwd=copy,
+                capture_output=True,
+                text=True,
+            )
+            path.write_text(original, encoding="utf-8")
+            failed = [
+                line.split(" - ")[0] for line in result.stdout.splitlines() if line.startswith("FAILED")
+            ]
+            elapsed = time.perf_counter() - start
+            if result.returncode == 0:
+                survivors += 1
+                print(f"{mutant.name:<22} SURVIVED ({elapsed:.0f} s)")
+            else:
+                culprit = failed[0] if failed else result.stdout[-200:]
+                print(f"{mutant.name:<22} killed by {culprit} ({elapsed:.0f} s)")
+    return survivors
+
+
+if __name__ == "__main__":
+    chosen = tuple(m for m in MUTANTS if len(sys.argv) == 1 or m.name in sys.argv[1:])
+    sys.exit(1 if run(chosen) else 0)
