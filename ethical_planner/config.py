@@ -328,10 +328,19 @@ def preset(name: str) -> PlannerConfig:
 def load_config(path: str | Path, base: str = "ethical") -> PlannerConfig:
     """Load a TOML file of overrides on top of the preset ``base`` (key ``preset`` wins).
 
+    A relative ``risk.delta_v_correction`` path is relative to the TOML file's folder.
+
     Raises:
         ValueError: unreadable file, unknown preset or key, invalid value; the message
             names the file and the dotted key.
     """
     data = read_toml(path, "planner configuration")
     with errors_in(path):
-        return preset(data.pop("preset", base)).with_overrides(data)
+        config = preset(data.pop("preset", base)).with_overrides(data)
+    correction = config.risk.delta_v_correction
+    if correction is not None and not Path(correction).is_absolute():
+        resolved = str(Path(path).parent / correction)
+        config = dataclasses.replace(
+            config, risk=dataclasses.replace(config.risk, delta_v_correction=resolved)
+        )
+    return config

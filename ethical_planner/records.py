@@ -88,7 +88,8 @@ def read_toml(path: str | Path, what: str) -> dict[str, Any]:
         what: what the file holds, for messages ("scenario").
 
     Raises:
-        ValueError: "cannot read <what> file <path>: <reason>" or "<path>: not valid TOML: ...".
+        ValueError: "cannot read <what> file <path>: <reason>", "<path>: not valid TOML: ..."
+            or "<path>: not UTF-8 text ...".
     """
     try:
         with open(path, "rb") as handle:
@@ -97,6 +98,8 @@ def read_toml(path: str | Path, what: str) -> dict[str, Any]:
         raise ValueError(f"cannot read {what} file {path}: {error.strerror}") from None
     except tomllib.TOMLDecodeError as error:
         raise ValueError(f"{path}: not valid TOML: {error}") from None
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not UTF-8 text (byte {error.start}); TOML files are UTF-8") from None
 
 
 @contextlib.contextmanager

@@ -130,45 +130,26 @@ def planner_configs(names: Sequence[str], config: Path | None) -> list:
             an invalid value; the message names the file and the key.
     """
     import dataclasses
-    import tomllib
 
     from ethical_planner.config import load_config, preset
     from ethical_planner.dv_correction import DeltaVCorrection
+    from ethical_planner.records import read_toml
 
     if config is None:
         return [preset(name) for name in names]
-    try:
-        with open(config, "rb") as handle:
-            keys = tomllib.load(handle)
-    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
-        keys = None  # load_config below names the file and the problem
-    if keys is not None and "preset" in keys and len(names) > 1:
+    keys = read_toml(config, "planner configuration")
+    if "preset" in keys and len(names) > 1:
         raise ValueError(
             f"--config {config}: the key 'preset' chooses one planner, but {len(names)} are asked "
             "for (--planners); remove the key to apply the file to each of them"
         )
     configs = []
     for name in names:
-        try:
-            loaded = load_config(config, base=name)
-        except OSError as error:
-            raise ValueError(f"--config {config}: cannot read: {error.strerror}") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-            raise ValueError(f"--config {config}: not valid TOML: {error}") from None
-        except ValueError as error:
-            message = str(error)
-            raise ValueError(message if str(config) in message else f"--config {config}: {message}") from None
-        if keys is not None and "name" not in keys:
+        loaded = load_config(config, base=name)
+        if "name" not in keys:
             loaded = dataclasses.replace(loaded, name=f"{loaded.name}+{Path(config).stem}")
-        correction = loaded.risk.delta_v_correction
-        if correction is not None and not Path(correction).is_absolute():
-            resolved = str(Path(config).parent / correction)
-            loaded = dataclasses.replace(
-                loaded, risk=dataclasses.replace(loaded.risk, delta_v_correction=resolved)
-            )
+        _check_planner_name(loaded.name, config)
         configs.append(loaded)
-    for planner in configs:
-        _check_planner_name(planner.name, config)
     path = configs[0].risk.delta_v_correction
     if path is not None:
         try:
