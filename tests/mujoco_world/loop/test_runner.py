@@ -82,8 +82,8 @@ def test_catalog_scenario_runs_to_a_defined_outcome_full_length(name):
 
 def test_same_scenario_planner_and_seed_give_the_same_summary():
     config = RunConfig(noise=ObservationNoise(position=0.2, velocity=0.2, yaw=0.02))
-    # the drifting car hits the ego at ~4.9 s; 6 s keep the crash and its measurement
-    scenario = dataclasses.replace(get_scenario("oncoming_drift"), duration=6.0)
+    # two scripted cars crash head-on at ~1.8 s while the ego plans around them
+    scenario = third_party_crash(duration=3.0)
     first = run_scenario(scenario, "ethical", seed=7, config=config)
     second = run_scenario(scenario, "ethical", seed=7, config=config)
     assert first.comparable_dict() == second.comparable_dict()
