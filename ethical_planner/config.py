@@ -112,6 +112,10 @@ class PredictionConfig:
     both directions instead of the growth terms. Eigenvalues below ``covariance_floor``
     [m^2] are raised to it.
 
+    ``learned_weights`` is the weights file of the ``"learned"`` predictor (empty: the
+    shipped weights); ``torch_threads`` its torch intra-op threads (set explicitly so
+    that a pool of planner processes does not oversubscribe the cores).
+
     Attributes:
         model: predictor name.
         sigma0_long, sigma0_lat: standard deviations at t = 0 [m].
@@ -134,6 +138,8 @@ class PredictionConfig:
     """
 
     model: str = "constant_acceleration"
+    learned_weights: str = ""
+    torch_threads: int = 1
 
     sigma0_long: float = 0.3
     sigma0_lat: float = 0.2
@@ -159,6 +165,10 @@ class PredictionConfig:
         check(self.covariance_floor > 0, "prediction.covariance_floor must be > 0 m^2")
         for name in ("turn_rate_time_constant", "acceleration_time_constant"):
             check(getattr(self, name) > 0, f"prediction.{name} must be > 0 s")
+        check(
+            isinstance(self.torch_threads, int) and self.torch_threads >= 1,
+            f"prediction.torch_threads must be an integer >= 1, got {self.torch_threads!r}",
+        )
 
 
 @dataclass(frozen=True, slots=True)
