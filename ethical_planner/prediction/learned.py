@@ -39,6 +39,7 @@ import numpy as np
 
 from ethical_planner.config import PredictionConfig
 from ethical_planner.prediction.base import PREDICTORS, Prediction, empty_prediction
+from ethical_planner.prediction.constant_turn_rate import _rotated_covariance
 from ethical_planner.road_users import RoadUser, RoadUserType
 
 #: Identifies a weights file of this model; bump ``FORMAT_VERSION`` when the layout changes.
@@ -304,8 +305,10 @@ class LearnedModel:
     Args:
         spec: the window and network shape.
         state: the network's parameters (``state_dict``).
-        calibration: covariance factors, shape (len(TYPE_GROUPS), n_future); ones
-            for an uncalibrated model.
+        calibration: recalibration (a, b) per type group and step, shape
+            (len(TYPE_GROUPS), n_future, 2): the covariance becomes
+            a * s^(2 (b - 1)) * Sigma with s^2 = trace(Sigma) / 2 [m^2] (``recalibrate``);
+            a = b = 1 (the default) leaves it unchanged.
         meta: provenance (data, split, seed, metrics); plain values.
     """
 
@@ -326,10 +329,14 @@ class LearnedModel:
             except (RuntimeError, KeyError) as error:
                 raise ValueError(f"weights do not fit the model {spec}: {error}") from None
         self.network.eval()
-        shape = (len(TYPE_GROUPS), spec.n_future)
+        shape = (len(TYPE_GROUPS), spec.n_future, 2)
         calibration = np.ones(shape) if calibration is None else np.asarray(calibration, dtype=float)
-        if calibration.shape != shape or not np.all(np.isfinite(calibration)) or calibration.min() <= 0:
-            raise ValueError(f"calibration must be positive and finite with shape {shape}")
+        if (
+            calibration.shape != shape
+            or not np.all(np.isfinite(calibration))
+            or calibration[..., 0].min() <= 0
+        ):
+            raise ValueError(f"calibration must be finite with shape {shape} and factors a > 0")
         self.calibration = calibration
         self.meta = dict(meta or {})
         self._torch = torch
@@ -402,8 +409,20 @@ class LearnedModel:
         mean = mean.double().numpy()
         cov = cov.double().numpy()
         if calibrated:
-            cov = cov * self.calibration[groups][:, :, None, None]
+            cov = recalibrate(cov, self.calibration[groups])
         return mean, cov
+
+
+def recalibrate(cov: np.ndarray, params: np.ndarray) -> np.ndarray:
+    """Covariances rescaled by a * s^(2 (b - 1)), s^2 = trace / 2 (b > 1 spreads confident and unsure apart).
+
+    Args:
+        cov: [m^2], shape (..., 2, 2).
+        params: (a, b), shape (..., 2), broadcast against ``cov``'s leading axes.
+    """
+    s2 = np.maximum(0.5 * (cov[..., 0, 0] + cov[..., 1, 1]), 1e-12)
+    factor = params[..., 0] * s2 ** (params[..., 1] - 1.0)
+    return cov * factor[..., None, None]
 
 
 def history_windows(
@@ -556,12 +575,7 @@ class LearnedPredictor:
         origin, yaw0 = positions[:, -1], headings[:, -1]
         mean, cov = to_world(mean_l, cov_l, origin, yaw0)
         config = self.config
-        c, s = np.cos(yaw0), np.sin(yaw0)
-        var_l, var_t = config.sigma0_long**2, config.sigma0_lat**2
-        cov0 = np.empty((n_obs, 2, 2))
-        cov0[:, 0, 0] = c * c * var_l + s * s * var_t
-        cov0[:, 1, 1] = s * s * var_l + c * c * var_t
-        cov0[:, 0, 1] = cov0[:, 1, 0] = c * s * (var_l - var_t)
+        cov0 = _rotated_covariance(np.float64(config.sigma0_long), np.float64(config.sigma0_lat), yaw0)
         mean_t, cov_t = _on_times(mean, cov, origin, cov0, spec, times)
         step = np.diff(mean_t, axis=1, prepend=mean_t[:, :1])
         step[:, 0] = step[:, 1] if n_t > 1 else 0.0

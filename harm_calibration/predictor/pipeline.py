@@ -11,20 +11,19 @@ import numpy as np
 
 from ethical_planner.prediction.learned import TYPE_GROUPS, LearnedModel, ModelSpec, to_world
 from harm_calibration.predictor.data import SPLIT, build_windows, split_windows
-from harm_calibration.predictor.evaluate import evaluate, write_report
-from harm_calibration.predictor.train import TrainConfig, TrainLog, fit_calibration, mahalanobis_sq, train
+from harm_calibration.predictor.evaluate import EVAL_FLOOR, evaluate, write_report
+from harm_calibration.predictor.train import TrainConfig, TrainLog, fit_calibration, train
 
 
-def calibrate(model: LearnedModel, val_windows) -> np.ndarray:  # noqa: ANN001 - Windows
-    """Fit and set the model's covariance factors on validation windows; returns them."""
+def calibrate(model: LearnedModel, val_windows, floor: float) -> np.ndarray:  # noqa: ANN001 - Windows
+    """Fit and set the model's recalibration on validation windows; returns it (see ``fit_calibration``)."""
     spec = model.spec
-    mean, cov = model.predict_local(
-        val_windows.features(spec), val_windows.groups, val_windows.speeds[:, -1], False
-    )
-    mean, cov = to_world(mean, cov, val_windows.positions[:, -1], val_windows.headings[:, -1])
-    factors = fit_calibration(mahalanobis_sq(mean, cov, val_windows.future), val_windows.groups)
-    model.calibration = factors
-    return factors
+    w = val_windows
+    mean, cov = model.predict_local(w.features(spec), w.groups, w.speeds[:, -1], False)
+    mean, cov = to_world(mean, cov, w.positions[:, -1], w.headings[:, -1])
+    params = fit_calibration(cov, w.future - mean, w.groups, floor)
+    model.calibration = params
+    return params
 
 
 def run_training(
@@ -74,7 +73,7 @@ def run_training(
         config,
         progress=lambda e, a, b: log(f"  epoch {e + 1}: train NLL {a:.3f}, validation NLL {b:.3f}"),
     )
-    factors = calibrate(model, splits["val"])
+    factors = calibrate(model, splits["val"], EVAL_FLOOR)
     total = time.perf_counter() - start
     summary = {
         "seed": config.seed,

@@ -51,7 +51,7 @@ class TrainConfig:
 
     epochs: int = 40
     batch: int = 512
-    lr: float = 2e-3
+    lr: float = 1e-3
     weight_decay: float = 1e-5
     seed: int = 0
     threads: int = 1
@@ -188,27 +188,64 @@ def mahalanobis_sq(mean: np.ndarray, cov: np.ndarray, target: np.ndarray) -> np.
     return (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / det
 
 
-def fit_calibration(d2: np.ndarray, groups: np.ndarray, grid: np.ndarray | None = None) -> np.ndarray:
-    """Covariance factors (n_groups, n_steps) from squared Mahalanobis distances.
+def _eigen_parts(cov: np.ndarray, error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues (..., 2) of ``cov`` and squared projections (..., 2) of ``error`` on its eigenvectors."""
+    eigval, eigvec = np.linalg.eigh(cov)
+    proj = np.einsum("...ji,...j->...i", eigvec, error)
+    return np.maximum(eigval, 0.0), proj**2
+
+
+def coverage_d2(eigval: np.ndarray, proj2: np.ndarray, factor: np.ndarray, floor: float) -> np.ndarray:
+    """Squared Mahalanobis distances under factor * Sigma with eigenvalues floored at ``floor`` [m^2]."""
+    return (proj2 / np.maximum(factor[..., None] * eigval, floor)).sum(-1)
+
+
+def fit_calibration(
+    cov: np.ndarray,
+    error: np.ndarray,
+    groups: np.ndarray,
+    floor: float,
+    a_grid: np.ndarray | None = None,
+    b_grid: np.ndarray | None = None,
+) -> np.ndarray:
+    """Recalibration (a, b) per type group and step from validation errors.
+
+    The covariance becomes a * s^(2 (b - 1)) * Sigma (s^2 = trace / 2,
+    ``ethical_planner.prediction.learned.recalibrate``), then floored like the
+    planner's; (a, b) minimise the sum of absolute differences between the observed
+    and nominal fractions inside the 1- and 2-sigma ellipses. b = 1 is a plain scale;
+    b > 1 widens the unsure predictions more than the confident ones (errors with
+    heavier tails than one Gaussian).
 
     Args:
-        d2: squared Mahalanobis distances under the uncalibrated covariance, (n, n_steps).
+        cov: uncalibrated covariances [m^2], (n, n_steps, 2, 2).
+        error: true minus predicted position [m], (n, n_steps, 2).
         groups: type group per row, (n,).
-        grid: candidate factors (default: 400 values from 0.1 to 30, log spaced).
+        floor: covariance floor [m^2] applied after recalibration.
+        a_grid, b_grid: candidates (default: a 0.1 .. 10 log spaced x 60, b 0.75 .. 1.5 x 16).
 
     Returns:
-        Factors; 1 for a group without rows.
+        (n_groups, n_steps, 2); (1, 1) for a group without rows.
     """
-    grid = np.geomspace(0.1, 30.0, 400) if grid is None else grid
-    out = np.ones((len(TYPE_GROUPS), d2.shape[1]))
+    a_grid = np.geomspace(0.1, 10.0, 60) if a_grid is None else a_grid
+    b_grid = np.linspace(0.75, 1.5, 16) if b_grid is None else b_grid
+    out = np.ones((len(TYPE_GROUPS), cov.shape[1], 2))
+    eigval, proj2 = _eigen_parts(cov, error)
+    s2 = np.maximum(eigval.mean(-1), 1e-12)
     for g in range(len(TYPE_GROUPS)):
-        rows = d2[groups == g]
-        if len(rows) == 0:
+        rows = groups == g
+        if not rows.any():
             continue
-        for step in range(d2.shape[1]):
-            values = np.sort(rows[:, step])
-            inside1 = np.searchsorted(values, grid * 1.0, side="right") / len(values)
-            inside2 = np.searchsorted(values, grid * 4.0, side="right") / len(values)
-            error = np.abs(inside1 - NOMINAL[1]) + np.abs(inside2 - NOMINAL[2])
-            out[g, step] = grid[int(np.argmin(error))]
+        for step in range(cov.shape[1]):
+            lam, p2, size = eigval[rows, step], proj2[rows, step], s2[rows, step]
+            best, best_err = (1.0, 1.0), np.inf
+            for b in b_grid:
+                shape = size ** (b - 1.0)  # (n,)
+                factor = a_grid[:, None] * shape[None, :]  # (n_a, n)
+                d2 = coverage_d2(lam[None], p2[None], factor, floor)
+                err = np.abs((d2 <= 1.0).mean(1) - NOMINAL[1]) + np.abs((d2 <= 4.0).mean(1) - NOMINAL[2])
+                k = int(np.argmin(err))
+                if err[k] < best_err - 1e-12:
+                    best, best_err = (float(a_grid[k]), float(b)), float(err[k])
+            out[g, step] = best
     return out

@@ -120,7 +120,7 @@ def test_to_world_rotates_means_and_covariances():
     cov = np.array([[[[4.0, 0.0], [0.0, 1.0]]]])
     m, c = to_world(mean, cov, np.array([[10.0, 5.0]]), np.array([math.pi / 2]))
     assert m[0, 0] == pytest.approx([10.0, 6.0])
-    assert c[0, 0] == pytest.approx([[1.0, 0.0], [0.0, 4.0]], abs=1e-12)
+    assert c[0, 0] == pytest.approx(np.array([[1.0, 0.0], [0.0, 4.0]]), abs=1e-12)
 
 
 def test_weights_files_round_trip_and_bad_files_give_clear_errors(tmp_path):

@@ -7,7 +7,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from ethical_planner.prediction.learned import TYPE_GROUPS, LearnedModel, ModelSpec  # noqa: E402
+from ethical_planner.prediction.learned import TYPE_GROUPS, LearnedModel, ModelSpec, recalibrate  # noqa: E402
 from ethical_planner.road_users import RoadUserType  # noqa: E402
 from harm_calibration.predictor.data import Windows, split_of, track_windows  # noqa: E402
 from harm_calibration.predictor.evaluate import (  # noqa: E402
@@ -116,13 +116,30 @@ def test_tiny_training_lowers_the_loss_and_is_reproducible():
 
 def test_calibration_recovers_a_known_variance_factor():
     rng = np.random.default_rng(0)
-    # True errors have twice the variance the model claims: d^2 = 2 * chi2(2).
-    d2 = 2.0 * rng.chisquare(2, size=(20000, 3))
-    groups = np.zeros(20000, dtype=int)
-    factors = fit_calibration(d2, groups)
-    assert factors[0] == pytest.approx(2.0, rel=0.05)
-    assert np.all(factors[1:] == 1.0)  # groups without rows keep factor 1
+    n, steps = 20000, 3
+    # Claimed variances vary over rows; true errors have twice the claimed variance.
+    var = rng.uniform(0.5, 4.0, size=(n, steps))
+    cov = np.zeros((n, steps, 2, 2))
+    cov[..., 0, 0] = cov[..., 1, 1] = var
+    error = rng.normal(size=(n, steps, 2)) * np.sqrt(2.0 * var)[..., None]
+    params = fit_calibration(cov, error, np.zeros(n, dtype=int), floor=1e-6)
+    # The coverage objective is flat along a ridge of (a, b): a near 2, b near 1.
+    assert params[0, :, 0] == pytest.approx(2.0, rel=0.2)
+    assert params[0, :, 1] == pytest.approx(1.0, abs=0.15)
+    assert np.all(params[1:] == 1.0)  # groups without rows keep (1, 1)
+    recalibrated = recalibrate(cov[:, 0], params[0, 0][None])
+    d2 = mahalanobis_sq(np.zeros(2), recalibrated, error[:, 0])
+    assert (d2 <= 1).mean() == pytest.approx(NOMINAL[1], abs=0.02)
     assert NOMINAL[1] == pytest.approx(0.3935, abs=1e-4) and NOMINAL[2] == pytest.approx(0.8647, abs=1e-4)
+
+
+def test_recalibration_power_spreads_sizes():
+    cov = np.zeros((2, 2, 2))
+    cov[0] = np.eye(2) * 0.25
+    cov[1] = np.eye(2) * 4.0
+    out = recalibrate(cov, np.array([2.0, 1.5]))
+    # a * s2^(b - 1) with s2 = 0.25 and 4: factors 2 * 0.5 = 1 and 2 * 2 = 4.
+    assert out[0, 0, 0] == pytest.approx(0.25) and out[1, 0, 0] == pytest.approx(16.0)
 
 
 def test_metrics_on_exact_gaussian_samples():
@@ -167,7 +184,13 @@ def test_evaluate_reports_every_predictor_and_category():
     torch.manual_seed(0)
     result = evaluate(LearnedModel(SPEC), synthetic_windows(4, rng))
     assert set(result["metrics"]) == {"learned", "learned_uncalibrated", "constant_velocity", "ctra"}
-    assert set(result["metrics"]["ctra"]) == {"car", "pedestrian", "pedestrians+cyclists"}
+    assert set(result["metrics"]["ctra"]) == {
+        "car",
+        "pedestrian",
+        "pedestrians+cyclists",
+        "car (moving)",
+        "pedestrians+cyclists (moving)",
+    }
     text = report_markdown(result)
     assert "| car | constant_velocity |" in text and "Nominal coverage" in text
     assert len(TYPE_GROUPS) == 5
