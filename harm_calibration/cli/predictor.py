@@ -85,7 +85,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _data(args: argparse.Namespace) -> list[Path]:
-    from harm_calibration.predictor.data import DEFAULT_DATA, shared_commonroad
+    from harm_calibration.predictor.data import DEFAULT_DATA
+    from mujoco_world.scenario.commonroad_tracks import shared_commonroad
 
     if args.data:
         return list(args.data)
