@@ -38,8 +38,13 @@ from typing import Any
 import numpy as np
 
 from ethical_planner.config import PredictionConfig
-from ethical_planner.prediction.base import PREDICTORS, Prediction, empty_prediction
-from ethical_planner.prediction.constant_turn_rate import _rotated_covariance
+from ethical_planner.prediction.base import (
+    PREDICTORS,
+    Prediction,
+    check_unique_ids,
+    empty_prediction,
+    rotated_covariance,
+)
 from ethical_planner.road_users import RoadUser, RoadUserType
 
 #: Identifies a weights file of this model; bump ``FORMAT_VERSION`` when the layout changes.
@@ -562,9 +567,7 @@ class LearnedPredictor:
             raise ValueError("times must be a non-empty 1-D array of finite seconds >= 0")
         if n_obs == 0:
             return empty_prediction(n_t)
-        ids = np.array([u.id for u in road_users])
-        if len(set(ids.tolist())) != n_obs:
-            raise ValueError("road-user ids must be unique")
+        ids = check_unique_ids(road_users)
         spec = self.model.spec
         groups = type_groups([u.type for u in road_users])
         length = np.array([u.shape.length for u in road_users])
@@ -575,7 +578,7 @@ class LearnedPredictor:
         origin, yaw0 = positions[:, -1], headings[:, -1]
         mean, cov = to_world(mean_l, cov_l, origin, yaw0)
         config = self.config
-        cov0 = _rotated_covariance(np.float64(config.sigma0_long), np.float64(config.sigma0_lat), yaw0)
+        cov0 = rotated_covariance(np.float64(config.sigma0_long), np.float64(config.sigma0_lat), yaw0)
         mean_t, cov_t = _on_times(mean, cov, origin, cov0, spec, times)
         step = np.diff(mean_t, axis=1, prepend=mean_t[:, :1])
         step[:, 0] = step[:, 1] if n_t > 1 else 0.0

@@ -6,7 +6,9 @@ predictor before and after recalibration and for two analytic baselines:
 - ``constant_velocity``: the product's analytic predictor (``predict_constant_turn_rate``)
   with the turn rate off and its default covariance growth (``PredictionConfig``);
 - ``ctra``: constant turn rate and constant acceleration (both from the last 0.2 s of
-  history, speed not below 0), with the same analytic covariance.
+  history, speed not below 0), with the same analytic covariance;
+- ``default (...)``: the planner's default analytic predictor (``PredictionConfig()``),
+  given the acceleration and turn rate of the last 0.2 s.
 
 Metrics over the model's horizon (0.2 .. 4 s): ADE and FDE [m], mean negative
 log-likelihood of the true position [nats, 2-D], and the fractions of true positions
@@ -23,12 +25,13 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from ethical_planner.config import PredictionConfig
+from ethical_planner.prediction import make_predictor
 from ethical_planner.prediction.constant_turn_rate import predict_constant_turn_rate
 from ethical_planner.prediction.learned import LearnedModel, to_world
 from ethical_planner.road_users import KinematicState, RoadUser, RoadUserType, Shape
@@ -51,7 +54,6 @@ MOVING_SPEED = 0.5  # [m/s]
 #: Covariance floor [m^2] of calibration and evaluation: a 10 cm standard deviation, the
 #: recordings' position resolution. The planner's own floor (0.1 m^2) is applied on top in use.
 EVAL_FLOOR = 0.01
-PREDICTOR_NAMES = ("learned", "learned_uncalibrated", "constant_velocity", "ctra")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -80,14 +82,20 @@ def learned_outputs(model: LearnedModel, windows: Windows, calibrated: bool, flo
     return Scored(mean, floor_covariance(cov, floor))
 
 
-def _road_users(windows: Windows, yaw_rate: np.ndarray) -> list[RoadUser]:
+def _road_users(windows: Windows, yaw_rate: np.ndarray, accel: np.ndarray | None = None) -> list[RoadUser]:
     pos, yaw, v = windows.positions[:, -1], windows.headings[:, -1], windows.speeds[:, -1]
+    accel = np.zeros(len(windows)) if accel is None else accel
     return [
         RoadUser(
             k,
             RoadUserType(str(windows.types[k])),
             KinematicState(
-                float(pos[k, 0]), float(pos[k, 1]), float(yaw[k]), float(v[k]), 0.0, float(yaw_rate[k])
+                float(pos[k, 0]),
+                float(pos[k, 1]),
+                float(yaw[k]),
+                float(v[k]),
+                float(accel[k]),
+                float(yaw_rate[k]),
             ),
             Shape(float(windows.length[k]), float(windows.width[k])),
         )
@@ -127,14 +135,17 @@ def ctra_mean(windows: Windows, times: np.ndarray, step: float, substeps: int = 
 def baseline_outputs(
     windows: Windows, times: np.ndarray, step: float, config: PredictionConfig
 ) -> dict[str, Scored]:
-    """Constant velocity and CTRA, with the analytic predictor's covariance."""
-    yaw_rate, _ = history_rates(windows, step)
+    """Constant velocity and CTRA with the analytic covariance, and the planner's default predictor."""
+    yaw_rate, accel = history_rates(windows, step)
     cv_config = PredictionConfig(use_turn_rate=False, covariance_floor=config.covariance_floor)
     cv = predict_constant_turn_rate(_road_users(windows, yaw_rate), np.concatenate([[0.0], times]), cv_config)
     ct = predict_constant_turn_rate(_road_users(windows, yaw_rate), np.concatenate([[0.0], times]), config)
+    default = make_predictor(replace(PredictionConfig(), covariance_floor=config.covariance_floor))
+    analytic = default.predict(_road_users(windows, yaw_rate, accel), np.concatenate([[0.0], times]))
     return {
         "constant_velocity": Scored(cv.mean[:, 1:], cv.cov[:, 1:]),
         "ctra": Scored(ctra_mean(windows, times, step), ct.cov[:, 1:]),
+        f"default ({default.name})": Scored(analytic.mean[:, 1:], analytic.cov[:, 1:]),
     }
 
 
@@ -241,7 +252,7 @@ def report_markdown(result: dict) -> str:
     per_predictor = result["metrics"]
     categories = list(next(iter(per_predictor.values())).keys())
     for category in categories:
-        for name in PREDICTOR_NAMES:
+        for name in per_predictor:
             m = per_predictor[name].get(category)
             if m is None:
                 continue

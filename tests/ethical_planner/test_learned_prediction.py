@@ -125,7 +125,7 @@ def test_to_world_rotates_means_and_covariances():
 
 def test_weights_files_round_trip_and_bad_files_give_clear_errors(tmp_path):
     torch.manual_seed(0)
-    model = LearnedModel(ModelSpec(hidden=(8,)), calibration=np.full((5, 20), 2.0), meta={"seed": 0})
+    model = LearnedModel(ModelSpec(hidden=(8,)), calibration=np.full((5, 20, 2), 2.0), meta={"seed": 0})
     path = tmp_path / "model.pt"
     model.save(path)
     loaded = LearnedModel.load(path)

@@ -186,7 +186,13 @@ def test_evaluate_reports_every_predictor_and_category():
     rng = np.random.default_rng(3)
     torch.manual_seed(0)
     result = evaluate(LearnedModel(SPEC), synthetic_windows(4, rng))
-    assert set(result["metrics"]) == {"learned", "learned_uncalibrated", "constant_velocity", "ctra"}
+    assert set(result["metrics"]) == {
+        "learned",
+        "learned_uncalibrated",
+        "constant_velocity",
+        "ctra",
+        "default (constant_acceleration)",
+    }
     assert set(result["metrics"]["ctra"]) == {
         "car",
         "pedestrian",
