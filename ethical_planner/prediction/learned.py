@@ -403,7 +403,10 @@ class LearnedModel:
     def predict_local(
         self, features: np.ndarray, groups: np.ndarray, current_speed: np.ndarray, calibrated: bool = True
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Mean [m] (n, n_future, 2) and covariance [m^2] (n, n_future, 2, 2) in each road user's frame."""
+        """Mean [m] (n, n_future, 2) and covariance [m^2] (n, n_future, 2, 2) in each road user's frame.
+
+        Covariances are recalibrated (if ``calibrated``) and made non-decreasing in size.
+        """
         torch = self._torch
         with torch.inference_mode():
             output = self.network(torch.as_tensor(features, dtype=torch.float32))
@@ -415,6 +418,10 @@ class LearnedModel:
         cov = cov.double().numpy()
         if calibrated:
             cov = recalibrate(cov, self.calibration[groups])
+        # Uncertainty never shrinks along the horizon: the size s^2 = trace / 2 is raised
+        # to its running maximum (per-step networks and calibration need not be monotone).
+        s2 = np.maximum(0.5 * (cov[..., 0, 0] + cov[..., 1, 1]), 1e-12)
+        cov = cov * (np.maximum.accumulate(s2, axis=1) / s2)[..., None, None]
         return mean, cov
 
 

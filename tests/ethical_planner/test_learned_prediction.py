@@ -199,5 +199,5 @@ def test_prediction_times_beyond_the_model_horizon_continue_smoothly():
     assert np.all(np.diff(np.linalg.det(prediction.cov[0])) >= -1e-9)
 
 
-SHIPPED_MEAN_X = [0.0, 10.0, 20.0, 30.0]
-SHIPPED_SIGMA_X = [0.3, 0.3, 0.6, 1.0]
+SHIPPED_MEAN_X = [0.0, 10.0543, 20.082, 30.2114]
+SHIPPED_SIGMA_X = [0.3162, 0.3162, 0.8342, 1.6662]
