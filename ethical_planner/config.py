@@ -114,7 +114,10 @@ class PredictionConfig:
 
     ``learned_weights`` is the weights file of the ``"learned"`` predictor (empty: the
     shipped weights); ``torch_threads`` its torch intra-op threads (set explicitly so
-    that a pool of planner processes does not oversubscribe the cores).
+    that a pool of planner processes does not oversubscribe the cores);
+    ``learned_recalibration`` applies the weights file's coverage recalibration (off by
+    default: on held-out locations it brings the 1-sigma coverage to nominal but
+    under-covers the 2-sigma ellipse and raises the NLL; README, learned predictor).
 
     Attributes:
         model: predictor name.
@@ -140,6 +143,7 @@ class PredictionConfig:
     model: str = "constant_acceleration"
     learned_weights: str = ""
     torch_threads: int = 1
+    learned_recalibration: bool = False
 
     sigma0_long: float = 0.3
     sigma0_lat: float = 0.2

@@ -575,16 +575,17 @@ class LearnedPredictor:
         if n_obs == 0:
             return empty_prediction(n_t)
         ids = check_unique_ids(road_users)
-        spec = self.model.spec
+        spec, config = self.model.spec, self.config
         groups = type_groups([u.type for u in road_users])
         length = np.array([u.shape.length for u in road_users])
         width = np.array([u.shape.width for u in road_users])
         positions, headings, speeds, available = history_windows(road_users, spec)
         features = encode(groups, length, width, positions, headings, speeds, available, spec)
-        mean_l, cov_l = self.model.predict_local(features, groups, speeds[:, -1])
+        mean_l, cov_l = self.model.predict_local(
+            features, groups, speeds[:, -1], config.learned_recalibration
+        )
         origin, yaw0 = positions[:, -1], headings[:, -1]
         mean, cov = to_world(mean_l, cov_l, origin, yaw0)
-        config = self.config
         cov0 = rotated_covariance(np.float64(config.sigma0_long), np.float64(config.sigma0_lat), yaw0)
         mean_t, cov_t = _on_times(mean, cov, origin, cov0, spec, times)
         step = np.diff(mean_t, axis=1, prepend=mean_t[:, :1])

@@ -188,6 +188,9 @@ def test_shipped_model_predicts_a_known_input_to_stored_values():
     assert np.sqrt(prediction.cov[0, :, 0, 0]) == pytest.approx(SHIPPED_SIGMA_X, abs=1e-3)
     # A car keeps roughly its speed for 3 s (a plausibility band, not the stored value).
     assert 25.0 < prediction.mean[0, 3, 0] < 35.0
+    recalibrated = make_predictor(PredictionConfig(model="learned", learned_recalibration=True))
+    prediction = recalibrated.predict([user], np.array([0.0, 1.0, 2.0, 3.0]))
+    assert np.sqrt(prediction.cov[0, :, 0, 0]) == pytest.approx(SHIPPED_SIGMA_X_RECALIBRATED, abs=1e-3)
 
 
 def test_prediction_times_beyond_the_model_horizon_continue_smoothly():
@@ -201,4 +204,5 @@ def test_prediction_times_beyond_the_model_horizon_continue_smoothly():
 
 
 SHIPPED_MEAN_X = [0.0, 10.0543, 20.082, 30.2114]
-SHIPPED_SIGMA_X = [0.3162, 0.3162, 0.8342, 1.6662]
+SHIPPED_SIGMA_X = [0.3162, 0.3162, 1.2236, 2.6275]
+SHIPPED_SIGMA_X_RECALIBRATED = [0.3162, 0.3162, 0.8342, 1.6662]
