@@ -226,8 +226,8 @@ def evaluate(model: LearnedModel, windows: Windows, config: PredictionConfig | N
     spec = model.spec
     times = spec.future_times
     outputs = {
-        "learned": learned_outputs(model, windows, True, config.covariance_floor),
-        "learned_uncalibrated": learned_outputs(model, windows, False, config.covariance_floor),
+        "learned": learned_outputs(model, windows, False, config.covariance_floor),
+        "learned_recalibrated": learned_outputs(model, windows, True, config.covariance_floor),
         **baseline_outputs(windows, times, spec.history_step, config),
     }
     levels = np.linspace(0.05, 0.95, 19)

@@ -53,3 +53,11 @@ def test_small_training_and_evaluation_on_real_files(tmp_path, capsys):
     assert metrics["recordings"] == ["SinD-851"]
     assert {"learned", "constant_velocity", "ctra"} <= set(metrics["metrics"])
     assert (report / "reliability.png").stat().st_size > 10_000
+
+
+def test_closed_loop_commands_reject_an_unknown_predictor(capsys, tmp_path):
+    assert (
+        main(["run", "highway_cut_in", "--predictor", "psychic", "--out", str(tmp_path), "--no-record"]) == 2
+    )
+    err = capsys.readouterr().err
+    assert "psychic" in err and "learned" in err

@@ -188,7 +188,7 @@ def test_evaluate_reports_every_predictor_and_category():
     result = evaluate(LearnedModel(SPEC), synthetic_windows(4, rng))
     assert set(result["metrics"]) == {
         "learned",
-        "learned_uncalibrated",
+        "learned_recalibrated",
         "constant_velocity",
         "ctra",
         "default (constant_acceleration)",
