@@ -189,7 +189,7 @@ def _progress_observer(label: str, enabled: bool):
 
 def _run(args: argparse.Namespace) -> int:
     from mujoco_world.loop.batch import RunTask, write_json
-    from mujoco_world.loop.runner import ObserverGroup, RunConfig, run_scenario
+    from mujoco_world.loop.runner import ObserverGroup, run_scenario
     from mujoco_world.loop.world import ObservationNoise
     from mujoco_world.scenario.sources import resolve_scenario
     from mujoco_world.storage.run_folder import recording_observer
