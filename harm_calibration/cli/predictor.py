@@ -7,8 +7,9 @@ repository, or ``$ETP_COMMONROAD``) and need the extra ``[learned]`` (torch).
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
+
+from harm_calibration.cli.common import add_json, print_json, say
 
 #: Parsed tracks are cached here between runs (git-ignored).
 DEFAULT_CACHE = Path("logs/predictor_cache")
@@ -62,6 +63,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument(
         "--report", type=Path, default=None, metavar="DIR", help="also evaluate on the test split"
     )
+    add_json(train)
     train.set_defaults(handler=_train)
 
     evaluate = commands.add_parser(
@@ -80,7 +82,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     evaluate.add_argument(
         "--split", choices=["train", "val", "test"], default="test", help="split (default test)"
     )
-    evaluate.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    add_json(evaluate)
     evaluate.set_defaults(handler=_eval)
 
 
@@ -128,7 +130,7 @@ def _train(args: argparse.Namespace) -> int:
         threads=args.threads,
         max_seconds=None if args.max_minutes is None else 60.0 * args.max_minutes,
     )
-    run_training(
+    _, _, summary = run_training(
         _data(args),
         args.out,
         config,
@@ -137,8 +139,10 @@ def _train(args: argparse.Namespace) -> int:
         cache=None if args.no_cache else args.cache,
         max_files=args.max_files,
         report=args.report,
-        log=lambda line: print(line, flush=True),
+        log=lambda line: say(args, line),
     )
+    if args.json:
+        print_json({"weights": str(args.out), **summary})
     return 0
 
 
@@ -159,7 +163,7 @@ def _eval(args: argparse.Namespace) -> int:
         args.max_files,
     )
     if args.json:
-        print(json.dumps(result["metrics"], indent=2))
+        print_json(result["metrics"])
     else:
         print(report_markdown(result))
         print(f"written: {args.out / 'report.md'}, metrics.json, reliability.png")
