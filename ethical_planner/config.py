@@ -11,45 +11,82 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from ethical_planner.harm import HarmModel
 from ethical_planner.records import errors_in, from_mapping, read_toml
 from ethical_planner.registry import Registry
-from ethical_planner.validation import check, check_numeric_fields_finite, parse_enum
+from ethical_planner.validation import (
+    check,
+    check_non_negative,
+    check_numeric_fields_finite,
+    check_positive,
+    parse_enum,
+)
 
 
 @dataclass(frozen=True, slots=True)
 class SamplingConfig:
-    """Candidate grid (paper Fig. 1 step 1).
+    """Candidate families of one planning cycle (paper Fig. 1 step 1).
+
+    Three families share one time grid, that of the longest horizon:
+
+    - the paper's grid: end speeds x end offsets x horizons (quartic s(t), quintic
+      d(t)); shorter horizons continue at constant speed and offset;
+    - braking candidates: brake at each of ``brake_decelerations`` and at the vehicle's
+      emergency deceleration (reached at ``vehicle.max_jerk``) to a stop, and stay
+      stopped, each combined with every end offset; the lateral shift is a quintic in
+      arc length completed over a fraction ``brake_lateral_fractions`` of the braking
+      distance (a vehicle cannot move sideways while it stands);
+    - the continuation of the previous cycle's plan (``CommitmentConfig``).
+
+    Below ``low_speed`` the grid's lateral motion is also a quintic in arc length,
+    over the distance each candidate travels in its horizon (Werling et al. 2010's
+    low-speed mode): a quintic in time would ask a crawling car to move sideways
+    faster than it moves forward.
 
     Attributes:
         n_speeds: number of end speeds per horizon.
         n_offsets: number of end lateral offsets per horizon.
         d_min, d_max: range of end lateral offsets from the reference path [m].
-        horizons: planning horizons T [s]; candidates of shorter horizons continue
-            at constant speed and offset up to the longest.
+        horizons: planning horizons T [s]. Several: a 1 s lateral move covers 0.5 m in
+            its first 0.5 s where a 2 s move covers 0.13 m (too slow to evade); 3 s
+            plans see far enough to stop from urban speeds.
         dt: time step [s].
         max_end_acceleration: end speeds reach up to v0 + this times T [m/s^2].
         max_end_deceleration: end speeds reach down to v0 - this times T (and 0) [m/s^2].
+        brake_candidates: sample the braking family.
+        brake_decelerations: decelerations of braking candidates besides the
+            emergency deceleration [m/s^2] (values above it are dropped).
+        brake_lateral_fractions: fractions of the braking distance over which a
+            braking candidate completes its lateral shift.
+        low_speed: below this speed the grid's lateral motion follows arc length [m/s].
     """
 
     n_speeds: int = 15
     n_offsets: int = 15
     d_min: float = -3.5
     d_max: float = 3.5
-    horizons: tuple[float, ...] = (2.0,)
+    horizons: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0)
     dt: float = 0.1
-    max_end_acceleration: float = 4.0
-    max_end_deceleration: float = 8.0
+    max_end_acceleration: float = 3.0
+    max_end_deceleration: float = 5.0
+    brake_candidates: bool = True
+    brake_decelerations: tuple[float, ...] = (2.0, 4.0, 6.0)
+    brake_lateral_fractions: tuple[float, ...] = (0.5, 1.0)
+    low_speed: float = 3.0
 
     def __post_init__(self) -> None:
         check_numeric_fields_finite("sampling", self)
         check(self.n_speeds >= 1, "sampling.n_speeds must be >= 1")
         check(self.n_offsets >= 1, "sampling.n_offsets must be >= 1")
         check(self.d_min <= self.d_max, "sampling.d_min must be <= sampling.d_max")
-        object.__setattr__(self, "horizons", tuple(float(h) for h in self.horizons))
+        for name in ("horizons", "brake_decelerations", "brake_lateral_fractions"):
+            object.__setattr__(self, name, tuple(float(h) for h in getattr(self, name)))
         check(len(self.horizons) >= 1, "sampling.horizons must name at least one horizon")
         check(self.dt > 0, f"sampling.dt must be > 0 s, got {self.dt}")
         for horizon in self.horizons:
@@ -61,37 +98,82 @@ class SamplingConfig:
             self.max_end_acceleration > 0 and self.max_end_deceleration > 0,
             "sampling.max_end_acceleration and max_end_deceleration must be > 0 m/s^2",
         )
+        check(
+            all(math.isfinite(b) and b > 0 for b in self.brake_decelerations),
+            f"sampling.brake_decelerations must be finite and > 0 m/s^2, got {self.brake_decelerations}",
+        )
+        check(
+            len(self.brake_lateral_fractions) >= 1
+            and all(math.isfinite(f) and 0 < f <= 1 for f in self.brake_lateral_fractions),
+            "sampling.brake_lateral_fractions must name at least one fraction in (0, 1], "
+            f"got {self.brake_lateral_fractions}",
+        )
+        check(self.low_speed >= 0, f"sampling.low_speed must be >= 0 m/s, got {self.low_speed}")
 
     @property
     def n_trajectories(self) -> int:
-        """Number of candidates per planning cycle."""
+        """Number of grid candidates per planning cycle (without braking and continuation)."""
         return self.n_speeds * self.n_offsets * len(self.horizons)
 
 
 @dataclass(frozen=True, slots=True)
-class VehicleLimits:
-    """Physical limits of the ego used by validity level 0.
+class VehicleConfig:
+    """The ego vehicle's physical limits, in one place (validity level 0 and braking).
+
+    Defaults describe the default ego, a BMW 320i (wheelbase 2.81 m, 35 degrees of
+    steering at the front wheels: a kerb-to-kerb turning circle of about 11 m), on dry
+    asphalt with the world's tyre friction (mu = 0.9, ``mujoco_world`` ControlConfig).
+
+    A kinematic bicycle turns with curvature kappa = tan(delta) / wheelbase, so the
+    steering limit bounds |kappa| <= tan(max_steering_angle) / wheelbase at every speed;
+    the tyres bound the lateral acceleration v^2 |kappa| <= max_lateral_acceleration,
+    which is the tighter bound above sqrt(max_lateral_acceleration / kappa_steer)
+    (5.7 m/s with the defaults); together ``max_curvature(v)``. Longitudinal and
+    lateral acceleration share the friction circle sqrt(a^2 + (v^2 kappa)^2) <=
+    friction_acceleration.
 
     Attributes:
-        v_max: [m/s]. a_max: [m/s^2]. a_min: most negative acceleration [m/s^2].
-        kappa_max: curvature [1/m], checked above ``kappa_check_speed`` [m/s] (curvature
-            is ill-defined at standstill).
-        emergency_deceleration: used by the emergency-braking fallback [m/s^2].
+        v_max: top speed [m/s].
+        a_max: largest forward acceleration [m/s^2] (drive-train limit).
+        emergency_deceleration: largest deceleration [m/s^2]: the hardest braking
+            candidates brake at it, and a plan braking harder is invalid.
+        max_jerk: rate at which braking builds up in braking candidates [m/s^3].
+        wheelbase: [m].
+        max_steering_angle: front-wheel angle [rad].
+        max_lateral_acceleration: [m/s^2].
+        friction_acceleration: radius of the friction circle [m/s^2] (mu g).
+        curvature_check_speed: curvature is checked where the speed exceeds this
+            [m/s]; below it the heading is ill-defined (the plan stands).
     """
 
     v_max: float = 50.0
     a_max: float = 5.0
-    a_min: float = -9.0
-    kappa_max: float = 0.2
-    kappa_check_speed: float = 1.0
     emergency_deceleration: float = 8.0
+    max_jerk: float = 30.0
+    wheelbase: float = 2.81
+    max_steering_angle: float = 0.61
+    max_lateral_acceleration: float = 8.0
+    friction_acceleration: float = 8.8
+    curvature_check_speed: float = 0.1
 
     def __post_init__(self) -> None:
-        check_numeric_fields_finite("vehicle", self)
-        check(self.v_max > 0, "vehicle.v_max must be > 0 m/s")
-        check(self.a_max > 0 > self.a_min, "vehicle.a_max must be > 0 and vehicle.a_min < 0")
-        check(self.kappa_max > 0, "vehicle.kappa_max must be > 0 1/m")
-        check(self.emergency_deceleration > 0, "vehicle.emergency_deceleration must be > 0")
+        check_positive("vehicle", **{f.name: getattr(self, f.name) for f in dataclasses.fields(self)})
+        check(
+            self.max_steering_angle < 0.5 * math.pi,
+            f"vehicle.max_steering_angle must be below pi/2 rad, got {self.max_steering_angle}",
+        )
+
+    @property
+    def steering_curvature(self) -> float:
+        """Largest curvature the steering allows [1/m]: tan(max_steering_angle) / wheelbase."""
+        return math.tan(self.max_steering_angle) / self.wheelbase
+
+    def max_curvature(self, speed: np.ndarray) -> np.ndarray:
+        """Largest curvature [1/m] at ``speed`` [m/s] (any shape): steering, then tyres."""
+        speed = np.asarray(speed, dtype=float)
+        with np.errstate(divide="ignore"):
+            tyres = self.max_lateral_acceleration / np.square(speed)
+        return np.minimum(self.steering_curvature, tyres)
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,13 +194,6 @@ class PredictionConfig:
     both directions instead of the growth terms. Eigenvalues below ``covariance_floor``
     [m^2] are raised to it.
 
-    ``learned_weights`` is the weights file of the ``"learned"`` predictor (empty: the
-    shipped weights); ``torch_threads`` its torch intra-op threads (set explicitly so
-    that a pool of planner processes does not oversubscribe the cores);
-    ``learned_recalibration`` applies the weights file's coverage recalibration (off by
-    default: on held-out locations it brings the 1-sigma coverage to nominal but
-    under-covers the 2-sigma ellipse and raises the NLL; README, learned predictor).
-
     Attributes:
         model: predictor name.
         sigma0_long, sigma0_lat: standard deviations at t = 0 [m].
@@ -127,9 +202,15 @@ class PredictionConfig:
         pedestrian_growth: growth of both standard deviations of pedestrians [m/s].
         covariance_floor: smallest covariance eigenvalue [m^2].
         use_turn_rate: False predicts straight lines.
-        turn_rate_time_constant: the observed turn rate decays as exp(-t / this) [s]
-            (constant-acceleration model): a swerve is an episode, not a circle. With
-            the default 0.8 s a turn rate keeps acting for 0.8 s in total.
+        turn_rate_time_constant: time constant of the critically damped return of the
+            heading to the road user's sustained course [s] (constant-acceleration
+            model): a swerve is an episode, not a circle. A turn rate omega without a
+            deviation from the course turns the heading by at most omega T / e.
+        sustained_turn_window: (start, end) [s before now] of the window of the road
+            user's motion history whose headings give its sustained course and turn rate
+            (a curve it follows); without a history that long the course is the current
+            heading. The sustained rate is capped at the current rate and dropped if
+            their signs differ (a curve ends, a swerve swings back).
         acceleration_time_constant: an observed positive acceleration decays as
             exp(-t / this) [s] (an acceleration phase ends; braking to a stop is held
             at its observed value).
@@ -141,9 +222,6 @@ class PredictionConfig:
     """
 
     model: str = "constant_acceleration"
-    learned_weights: str = ""
-    torch_threads: int = 1
-    learned_recalibration: bool = False
 
     sigma0_long: float = 0.3
     sigma0_lat: float = 0.2
@@ -154,9 +232,10 @@ class PredictionConfig:
     covariance_floor: float = 0.1
     use_turn_rate: bool = True
     turn_rate_time_constant: float = 0.8
+    sustained_turn_window: tuple[float, float] = (2.5, 1.0)
     acceleration_time_constant: float = 1.0
-    acceleration_sigma: float = 0.5
-    acceleration_sigma_per_observed: float = 0.2
+    acceleration_sigma: float = 0.2
+    acceleration_sigma_per_observed: float = 0.1
     max_observed_acceleration: float = 10.0
 
     def __post_init__(self) -> None:
@@ -164,15 +243,18 @@ class PredictionConfig:
         check(isinstance(self.model, str) and bool(self.model), "prediction.model must name a predictor")
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if not isinstance(value, bool | str):
+            if not isinstance(value, bool | str | tuple):
                 check(value >= 0, f"prediction.{f.name} must be >= 0, got {value}")
         check(self.covariance_floor > 0, "prediction.covariance_floor must be > 0 m^2")
         for name in ("turn_rate_time_constant", "acceleration_time_constant"):
             check(getattr(self, name) > 0, f"prediction.{name} must be > 0 s")
+        window = tuple(float(w) for w in self.sustained_turn_window)
         check(
-            isinstance(self.torch_threads, int) and self.torch_threads >= 1,
-            f"prediction.torch_threads must be an integer >= 1, got {self.torch_threads!r}",
+            len(window) == 2 and all(math.isfinite(w) for w in window) and window[0] > window[1] >= 0,
+            "prediction.sustained_turn_window must be (start, end) seconds before now with "
+            f"start > end >= 0, got {self.sustained_turn_window}",
         )
+        object.__setattr__(self, "sustained_turn_window", window)
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,6 +267,10 @@ class RiskConfig:
         gate_sigmas: distance gate of the collision probability [standard deviations].
         max_acceptable_risk: R_max; a candidate with R_ego or any R_k above it is level 3.
         boundary_harm: add the harm of hitting a wall when a candidate leaves the road.
+        road_edge_margin: a candidate leaves the road (level 2) when its footprint
+            comes closer than this to the edge of the drivable area [m]: kerbs and walls
+            stand right at the edge, and a plan that skims them at an angle hits them
+            with a few centimetres of tracking error (measured in overtake_cyclist).
         delta_v_correction: path of a ``calibration.json`` written by ``etp impacts``
             (a ``DeltaVCorrection``); None plans with the plain Eq. 1 delta-v.
     """
@@ -192,8 +278,9 @@ class RiskConfig:
     harm_model: HarmModel = HarmModel.REDUCED_SYM
     pedestrian_model: HarmModel = HarmModel.PEDESTRIAN_MAIS3
     gate_sigmas: float = 6.0
-    max_acceptable_risk: float = 0.05
+    max_acceptable_risk: float = 0.002
     boundary_harm: bool = True
+    road_edge_margin: float = 0.25
     delta_v_correction: str | None = None
 
     def __post_init__(self) -> None:
@@ -207,6 +294,7 @@ class RiskConfig:
             "risk.delta_v_correction must be the path of a calibration JSON file or unset",
         )
         check(self.gate_sigmas > 0, "risk.gate_sigmas must be > 0")
+        check_non_negative("risk", road_edge_margin=self.road_edge_margin)
         check(
             0.0 <= self.max_acceptable_risk <= 1.0,
             f"risk.max_acceptable_risk must lie in [0, 1], got {self.max_acceptable_risk}",
@@ -245,9 +333,55 @@ class ResponsibilityConfig:
         )
 
 
+class PathReference(StrEnum):
+    """What the mobility's path term measures the lateral offset against."""
+
+    #: The centre of the lane the candidate is in at each step (lane centres of the
+    #: environment), with a preference for the route's lane.
+    LANES = "lanes"
+    #: The reference path, the route's own lane (the reference implementation).
+    ROUTE = "route"
+
+
 @dataclass(frozen=True, slots=True)
 class CostWeights:
     """Weights of Eqs. 5-11 and of comfort and mobility.
+
+    Units: the mobility and comfort terms are costs per m/s of speed deficit and the
+    like; Eq. 5 multiplies the risk cost J_risk (Eq. 7, in units of risk, i.e. of the
+    probability of an MAIS3+ injury) by ``risk``. The defaults are chosen so that risk
+    decides whenever it is not negligible (issue 9, cause 4); ``preset("reference")``
+    runs the paper's (reference implementation's) weights. Reasons, default by default:
+
+    - risk = 5000: with w_B = 33.3 a risk of 1e-3 to one of five road users
+      (J_B = 1e-4 over |S_R| = 10 entries) costs 17, as much as a lane change plus a
+      speed deficit of several m/s; a risk of 1e-5 (a pass at a comfortable distance)
+      costs 0.2, below the commitment margin. The reference's 250 made risks below
+      ~1e-2 irrelevant next to comfort and mobility (at most 0.7 in the catalog).
+    - bayes, equality, maximin = 33.3 each: the paper's equal weighting of the
+      principles (it leaves their balance to society); kept.
+    - responsibility = 0: the paper's experiment (non-interactive agents);
+      ``ethical_responsible`` sets 0.5.
+    - maximin_gamma = 4: the paper's discount of the worst harm regardless of
+      probability. gamma = 10 made it ~1e-10 for car harms and ~1e-6 for a pedestrian
+      at 30 km/h (never deciding); with 4 a pedestrian's harm of 0.3 at a counted
+      probability costs 33.3 x 0.0081 = 0.27 in J_risk (1350 in Eq. 5): a candidate
+      that may hit a vulnerable road user is avoided when one that cannot exists, while
+      car harms (0.03: 8e-7) stay negligible.
+    - maximin_epsilon = 1e-3: a collision probability below it is not a possible
+      collision for maximin (the reference's value).
+    - jerk_lon, jerk_lat = 0.05: the reference's comfort weights (a 3.5 m lane change
+      in 3 s costs 1.8, in 2 s 13.8).
+    - speed = 2: one m/s of mean speed deficit over the horizon costs 2, so that
+      staying behind a cyclist at 5 m/s on a 16.7 m/s road (23) costs more than a
+      clear overtake (a lane, its transition and comfort: ~10).
+    - path_distance = 1: one m of mean offset from the centre of the lane the
+      candidate ends in costs as much as 0.5 m/s: lanes are where a car belongs, but
+      a swerve around a walker is cheap. Measured against the lane the candidate ends
+      in (``path_reference``), an overtake is not a permanent path deviation.
+    - other_lane = 5: per lane between the lane a candidate ends in and the route's
+      lane: keep to the own lane and return to it after an overtake (a 3 s return
+      costs ~3.6 in transition and comfort).
 
     Attributes:
         risk: w_risk of Eq. 5.
@@ -258,28 +392,75 @@ class CostWeights:
         maximin_epsilon: collision probability above which a harm counts for maximin.
         jerk_lon, jerk_lat: weights of integrated squared jerk [per m^2/s^5].
         speed: weight of the mean |v - v_desired| [per m/s].
-        path_distance: weight of the mean |d| from the reference path [per m].
+        path_distance: weight of the mean lateral offset from the path reference [per m].
+        other_lane: weight per lane between the end lane and the route's lane.
+        path_reference: what the path term measures against (``PathReference``).
     """
 
-    risk: float = 250.0
+    risk: float = 1000.0
     bayes: float = 33.3
     equality: float = 33.3
     maximin: float = 33.3
     responsibility: float = 0.0
     ego_risk: float = 0.0
-    maximin_gamma: float = 10.0
-    maximin_epsilon: float = 1e-3
-    jerk_lon: float = 0.05
-    jerk_lat: float = 0.05
-    speed: float = 1.0
-    path_distance: float = 10.0
+    maximin_gamma: float = 4.0
+    maximin_epsilon: float = 0.01
+    jerk_lon: float = 0.02
+    jerk_lat: float = 0.02
+    speed: float = 2.0
+    path_distance: float = 1.0
+    other_lane: float = 10.0
+    path_reference: PathReference = PathReference.LANES
 
     def __post_init__(self) -> None:
+        object.__setattr__(
+            self,
+            "path_reference",
+            parse_enum(PathReference, self.path_reference, "path reference", "weights.path_reference"),
+        )
         check_numeric_fields_finite("weights", self)
         for f in dataclasses.fields(self):
-            check(getattr(self, f.name) >= 0, f"weights.{f.name} must be >= 0")
+            value = getattr(self, f.name)
+            if not isinstance(value, str):
+                check(value >= 0, f"weights.{f.name} must be >= 0")
         check(self.maximin_gamma >= 1, "weights.maximin_gamma must be >= 1 (Eq. 10)")
         check(self.responsibility <= 1, "weights.responsibility must lie in [0, 1]")
+
+
+@dataclass(frozen=True, slots=True)
+class CommitmentConfig:
+    """Commitment to a manoeuvre: the previous plan is kept unless a better one is clearly better.
+
+    The previous cycle's plan, continued from where the ego is on it, is one more
+    candidate. It is chosen over the cheapest candidate of the same validity level if
+    its cost is within ``relative_margin`` |J_best| + ``absolute_margin`` of it (the
+    absolute part only on the valid level, where Eq. 5's comfort and mobility set the
+    scale; Eq. 6's risk costs have no fixed scale). A cost difference below the margin
+    is within what one grid step of offset or speed and one cycle of re-prediction
+    change, and swapping between equivalent manoeuvres is how the planner lost a
+    working swerve (issue 9, cause 1). Across levels there is no hysteresis: a plan that
+    became invalid, riskier than R_max or colliding is dropped at once.
+
+    Attributes:
+        enabled: add the continuation and apply the hysteresis.
+        relative_margin: [1].
+        absolute_margin: [cost units of Eq. 5].
+        max_deviation: the continuation is dropped if the ego is further than this from
+            it (position [m]) or its speed differs by more than this [m/s].
+    """
+
+    enabled: bool = True
+    relative_margin: float = 0.05
+    absolute_margin: float = 0.5
+    max_deviation: float = 0.5
+
+    def __post_init__(self) -> None:
+        check_non_negative(
+            "commitment",
+            relative_margin=self.relative_margin,
+            absolute_margin=self.absolute_margin,
+            max_deviation=self.max_deviation,
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -294,11 +475,12 @@ class PlannerConfig:
     name: str = "ethical"
     desired_speed: float | None = None
     sampling: SamplingConfig = field(default_factory=SamplingConfig)
-    vehicle: VehicleLimits = field(default_factory=VehicleLimits)
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     prediction: PredictionConfig = field(default_factory=PredictionConfig)
     risk: RiskConfig = field(default_factory=RiskConfig)
     responsibility: ResponsibilityConfig = field(default_factory=ResponsibilityConfig)
     weights: CostWeights = field(default_factory=CostWeights)
+    commitment: CommitmentConfig = field(default_factory=CommitmentConfig)
 
     def __post_init__(self) -> None:
         if self.desired_speed is not None:
@@ -328,6 +510,26 @@ PRESETS.register(
     {"name": "standard", "weights": {"risk": 0.0, "bayes": 0.0, "equality": 0.0, "maximin": 0.0}},
 )
 PRESETS.register("ethical_responsible", {"name": "ethical_responsible", "weights": {"responsibility": 0.5}})
+#: The paper's parameterisation (reference implementation): its weights, gamma, R_max
+#: and a path term against the route's lane. The sampling is the default one.
+PRESETS.register(
+    "reference",
+    {
+        "name": "reference",
+        "risk": {"max_acceptable_risk": 0.05},
+        "weights": {
+            "risk": 250.0,
+            "maximin_gamma": 10.0,
+            "maximin_epsilon": 1e-3,
+            "jerk_lon": 0.05,
+            "jerk_lat": 0.05,
+            "speed": 1.0,
+            "path_distance": 10.0,
+            "other_lane": 0.0,
+            "path_reference": "route",
+        },
+    },
+)
 
 
 def preset(name: str) -> PlannerConfig:

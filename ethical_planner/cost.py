@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ethical_planner.config import CostWeights
+from ethical_planner.config import CostWeights, PathReference
 from ethical_planner.validity import Validity
 
 
@@ -123,6 +123,39 @@ def responsibility(risks: np.ndarray, r: np.ndarray, present: np.ndarray | None 
     return bayes(r * risks, present)
 
 
+def path_deviation(
+    d: np.ndarray, lane_offsets: tuple[float, ...], lane_width: float, reference: PathReference
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lateral deviation of candidates for the mobility term.
+
+    With ``LANES`` a candidate is measured at every step against the centre of the lane
+    it is in (the nearest lane centre of the environment), so a candidate that changes
+    lanes pays for the transition, not for the lane it ends in; the second output is
+    the mean number of lanes between that lane and the route's (the lane centre
+    nearest the reference path), for the lane preference. With ``ROUTE`` the reference
+    is the reference path itself (d = 0; the reference implementation) and no lane is
+    counted.
+
+    Args:
+        d: lateral offsets from the reference path [m], shape (n, n_t).
+        lane_offsets: lane centres' offsets from the reference path [m].
+        lane_width: [m].
+        reference: what to measure against.
+
+    Returns:
+        (mean |d - lane centre| [m], mean lanes away from the route's lane), (n,) each.
+    """
+    n = d.shape[0]
+    if reference is PathReference.ROUTE or not lane_offsets:
+        return np.abs(d).mean(axis=1), np.zeros(n)
+    centres = np.sort(np.asarray(lane_offsets, dtype=float))
+    # Nearest lane centre of every (candidate, step): between midpoints of sorted centres.
+    lane = np.searchsorted(0.5 * (centres[1:] + centres[:-1]), d)
+    route_lane = int(np.abs(centres).argmin())
+    lanes_away = np.abs(centres[lane] - centres[route_lane]) / lane_width
+    return np.abs(d - centres[lane]).mean(axis=1), lanes_away.mean(axis=1)
+
+
 def total_cost(
     risks: np.ndarray,
     present: np.ndarray,
@@ -133,7 +166,8 @@ def total_cost(
     jerk_lon: np.ndarray,
     jerk_lat: np.ndarray,
     speed_deviation: np.ndarray,
-    path_deviation: np.ndarray,
+    lateral_deviation: np.ndarray,
+    lanes_away: np.ndarray,
     levels: np.ndarray,
     weights: CostWeights,
 ) -> CostBreakdown:
@@ -149,7 +183,9 @@ def total_cost(
         jerk_lon: (n,) integrated squared longitudinal jerk [m^2/s^5].
         jerk_lat: (n,) integrated squared lateral jerk [m^2/s^5].
         speed_deviation: (n,) mean |v - v_desired| [m/s].
-        path_deviation: (n,) mean |d| from the reference path [m].
+        lateral_deviation: (n,) mean lateral offset from the path reference [m]
+            (``path_deviation``).
+        lanes_away: (n,) mean lanes between the current lane and the route's lane.
         levels: (n,) validity levels.
         weights: the weights.
     """
@@ -165,7 +201,11 @@ def total_cost(
         + weights.ego_risk * ego_combined
     )
     comfort = weights.jerk_lon * jerk_lon + weights.jerk_lat * jerk_lat
-    mobility = weights.speed * speed_deviation + weights.path_distance * path_deviation
+    mobility = (
+        weights.speed * speed_deviation
+        + weights.path_distance * lateral_deviation
+        + weights.other_lane * lanes_away
+    )
     valid = levels == Validity.VALID
     total = np.where(valid, weights.risk * j_risk + comfort + mobility, j_risk)
     return CostBreakdown(j_b, j_e, j_m, j_r, ego_combined, j_risk, comfort, mobility, total)

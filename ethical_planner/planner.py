@@ -16,14 +16,21 @@ from typing import Any
 import numpy as np
 
 from ethical_planner.config import PlannerConfig
-from ethical_planner.cost import CostBreakdown, risk_set, total_cost
+from ethical_planner.cost import CostBreakdown, path_deviation, risk_set, total_cost
 from ethical_planner.dv_correction import DeltaVCorrection
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.prediction import Prediction, Predictor, make_predictor
 from ethical_planner.responsibility import LegalCorridors, responsibilities
 from ethical_planner.risk import RiskAssessment, assess_risk
 from ethical_planner.road_users import EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser, RoadUserType, Shape
-from ethical_planner.sampling import Candidates, emergency_braking, frenet_state, sample_candidates
+from ethical_planner.sampling import (
+    CandidateKind,
+    Candidates,
+    PreviousPlan,
+    emergency_braking,
+    frenet_state,
+    sample_candidates,
+)
 from ethical_planner.validity import Validity, physically_invalid, validity_levels
 from ethical_planner.workers import Workers
 
@@ -79,6 +86,54 @@ class RoadUserAssessment:
     ego_responsibility: float
 
 
+@dataclass(frozen=True, slots=True)
+class CandidateParameters:
+    """What the chosen candidate is, in the terms it was sampled in.
+
+    Attributes:
+        kind: family (grid, brake, continuation, emergency).
+        horizon: its horizon T [s] (a braking candidate's stop time; a continuation's
+            remaining horizon).
+        end_speed: [m/s]. end_offset: lateral offset from the reference path [m].
+        deceleration: a braking candidate's deceleration [m/s^2], else 0.
+    """
+
+    kind: CandidateKind
+    horizon: float
+    end_speed: float
+    end_offset: float
+    deceleration: float
+
+    @classmethod
+    def of(cls, candidates: Candidates, index: int) -> CandidateParameters:
+        """The parameters of candidate ``index``."""
+        return cls(
+            CandidateKind(int(candidates.kind[index])),
+            float(candidates.horizon[index]),
+            float(candidates.end_speed[index]),
+            float(candidates.end_offset[index]),
+            float(candidates.deceleration[index]),
+        )
+
+    def describe(self) -> str:
+        """Short text: "brake 8 m/s^2 to offset -0.5 m", "grid T 1.5 s, 12 m/s, offset 3.5 m"."""
+        if self.kind in (CandidateKind.BRAKE, CandidateKind.EMERGENCY) or self.deceleration > 0:
+            what = f"brake at {self.deceleration:g} m/s^2 to a stop at offset {self.end_offset:+.2f} m"
+        else:
+            what = f"T {self.horizon:.2f} s to {self.end_speed:.1f} m/s at offset {self.end_offset:+.2f} m"
+        return f"{self.kind.name.lower()}: {what}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able form."""
+        return {
+            "kind": self.kind.name.lower(),
+            "horizon": self.horizon,
+            "end_speed": self.end_speed,
+            "end_offset": self.end_offset,
+            "deceleration": self.deceleration,
+        }
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class Decision:
     """Readable record of one planning cycle.
@@ -87,6 +142,10 @@ class Decision:
         planner: preset name.
         trajectory: the chosen plan.
         chosen_index: index of the chosen candidate, -1 for emergency braking.
+        candidate: the chosen candidate's family and parameters.
+        continued: the plan is the continuation of the previous cycle's.
+        max_risk_refused: candidates above R_max (level 3) that Eq. 5 would have
+            preferred to the chosen valid plan: R_max decided this cycle if > 0.
         level: validity level of the chosen plan.
         level_counts: candidates per validity level.
         invalid_counts: physically invalid candidates per broken limit.
@@ -106,6 +165,9 @@ class Decision:
     planner: str
     trajectory: Trajectory
     chosen_index: int
+    candidate: CandidateParameters
+    continued: bool
+    max_risk_refused: int
     level: int
     level_counts: dict[int, int]
     invalid_counts: dict[str, int]
@@ -127,6 +189,9 @@ class Decision:
         return {
             "planner": self.planner,
             "chosen_index": self.chosen_index,
+            "candidate": self.candidate.to_dict(),
+            "continued": self.continued,
+            "max_risk_refused": self.max_risk_refused,
             "level": self.level,
             "level_counts": {str(k): v for k, v in self.level_counts.items()},
             "invalid_counts": dict(self.invalid_counts),
@@ -152,7 +217,7 @@ class Decision:
         counts = ", ".join(f"L{k}: {v}" for k, v in sorted(self.level_counts.items(), reverse=True))
         lines = [
             f"[{self.planner}] level {self.level} ({Validity(self.level).name.lower()}), "
-            f"candidate {self.chosen_index}; {counts}",
+            f"candidate {self.chosen_index} ({self.candidate.describe()}); {counts}",
             f"  why: {self.reason}",
             f"  ego risk {self.ego_combined_risk:.4f} (R_max {self.max_acceptable_risk:g}), "
             f"boundary {self.boundary_risk:.4f}",
@@ -224,6 +289,7 @@ class Planner:
         self.predictor = predictor
         self.workers = Workers() if workers is None else workers
         self.dv_correction = _load_correction(config.risk.delta_v_correction)
+        self._previous: PreviousPlan | None = None
         self.desired_speed = (
             config.desired_speed if config.desired_speed is not None else environment.speed_limit
         )
@@ -295,7 +361,12 @@ class Planner:
             candidates.jerk_lon,
             candidates.jerk_lat,
             np.abs(candidates.v - self.desired_speed).mean(axis=1),
-            np.abs(candidates.d).mean(axis=1),
+            *path_deviation(
+                candidates.d,
+                self.environment.lane_offsets,
+                self.environment.lane_width,
+                config.weights.path_reference,
+            ),
             levels,
             config.weights,
         )
@@ -326,9 +397,11 @@ class Planner:
         config = self.config
         timings: dict[str, float] = {}
         start_clock = clock = time.perf_counter()
-        start = frenet_state(ego_state, self.environment.reference_path)
+        path = self.environment.reference_path
+        start = frenet_state(ego_state, path)
+        previous = self._previous if config.commitment.enabled else None
         candidates = sample_candidates(
-            start, self.environment.reference_path, config.sampling, config.vehicle.v_max
+            start, path, config.sampling, config.vehicle, previous, config.commitment.max_deviation
         )
         timings["sampling"] = _since(clock)
         clock = time.perf_counter()
@@ -353,43 +426,113 @@ class Planner:
         grid = self._evaluate(candidates, prediction, corridors, timings)
         clock = time.perf_counter()
         best_level = int(grid.levels.max())
-        index, reason = self._choose(grid, best_level)
         chosen = grid
         emergency = False
         if best_level == Validity.PHYSICALLY_INVALID:
-            brake = emergency_braking(
-                start,
-                self.environment.reference_path,
-                candidates.t,
-                config.vehicle.emergency_deceleration,
-            )
+            brake = emergency_braking(start, path, candidates.t, config.vehicle)
             chosen = self._evaluate(brake, prediction, corridors, timings)
-            index, emergency = 0, True
+            index, emergency, continued = 0, True, False
             reason = (
                 "emergency braking: every sampled candidate breaks a physical limit ("
                 + ", ".join(f"{k} {int(v.sum())}" for k, v in grid.invalid.items())
                 + ")"
             )
+        else:
+            index, reason, continued = self._choose(grid, best_level)
+        self._previous = PreviousPlan.of(chosen.candidates, index)
         timings["selection"] = _since(clock)
         timings["total"] = _since(start_clock)
-        return self._record(grid, chosen, index, reason, emergency, prediction, road_users, timings)
+        return self._record(
+            grid, chosen, index, reason, emergency, continued, prediction, road_users, timings
+        )
 
-    def _choose(self, grid: _Evaluation, best_level: int) -> tuple[int, str]:
-        """Cheapest candidate of the highest level; comfort and mobility break ties."""
+    def reset(self) -> None:
+        """Forget the previous plan (a new run, or the ego was moved)."""
+        self._previous = None
+
+    def _choose(self, grid: _Evaluation, best_level: int) -> tuple[int, str, bool]:
+        """Cheapest candidate of the highest level, unless the previous plan is as good.
+
+        Comfort and mobility break ties. The continuation of the previous plan is kept
+        if it is on the same level and within the commitment margin of the cheapest
+        (``CommitmentConfig``).
+
+        Returns:
+            (index, reason, whether the continuation was kept).
+        """
         in_level = np.flatnonzero(grid.levels == best_level)
         costs = grid.costs
         secondary = costs.comfort[in_level] + costs.mobility[in_level]
         order = np.lexsort((secondary, costs.total[in_level]))
         index = int(in_level[order[0]])
+        kind = grid.candidates.kind
         name = Validity(best_level).name.lower().replace("_", " ")
+        equation = "Eq. 5" if best_level == Validity.VALID else "Eq. 6"
         if best_level == Validity.VALID:
             reason = f"lowest total cost (Eq. 5) among {len(in_level)} valid candidates"
+            reason += self._refused_by_max_risk(grid, index)
+        elif best_level == Validity.COLLISION:
+            reason = self._fallback_reason(grid, in_level, index)
         else:
             reason = (
                 f"no valid candidate; highest available level is {best_level} ({name}); "
                 f"lowest risk cost (Eq. 6) among its {len(in_level)} candidates"
             )
-        return index, reason
+        commitment = self.config.commitment
+        kept = np.flatnonzero((kind == CandidateKind.CONTINUATION) & (grid.levels == best_level))
+        if commitment.enabled and kept.size and int(kept[0]) != index:
+            j_best, j_kept = float(costs.total[index]), float(costs.total[kept[0]])
+            margin = commitment.relative_margin * abs(j_best)
+            if best_level == Validity.VALID:
+                margin += commitment.absolute_margin
+            if j_kept <= j_best + margin:
+                reason += (
+                    f"; kept the previous plan: its cost {j_kept:.4g} is within the commitment "
+                    f"margin {margin:.3g} of the cheapest ({j_best:.4g}, {equation})"
+                )
+                return int(kept[0]), reason, True
+        return index, reason, bool(kind[index] == CandidateKind.CONTINUATION)
+
+    def _refused(self, grid: _Evaluation, index: int) -> np.ndarray:
+        """Candidates above R_max (level 3) that Eq. 5 would have preferred to ``index``."""
+        if grid.levels[index] != Validity.VALID:
+            return np.zeros(0, dtype=int)
+        costs, weights = grid.costs, self.config.weights
+        eq5 = weights.risk * costs.risk + costs.comfort + costs.mobility
+        return np.flatnonzero((grid.levels == Validity.ABOVE_MAX_RISK) & (eq5 < costs.total[index]))
+
+    def _refused_by_max_risk(self, grid: _Evaluation, index: int) -> str:
+        """Text on the candidates R_max refused that Eq. 5 would have preferred (or "")."""
+        refused = self._refused(grid, index)
+        if not refused.size:
+            return ""
+        costs = grid.costs
+        eq5 = self.config.weights.risk * costs.risk + costs.comfort + costs.mobility
+        best = int(refused[np.argmin(eq5[refused])])
+        risk = grid.risk
+        worst = max(float(risk.ego_combined[best]), float(risk.risk_obs[best].max(initial=0.0)))
+        return (
+            f"; R_max refused {refused.size} cheaper candidates (cheapest: "
+            f"{_describe(grid.candidates, best)}, Eq. 5 cost {eq5[best]:.4g}, risk {worst:.3g} > "
+            f"R_max {self.config.risk.max_acceptable_risk:g})"
+        )
+
+    def _fallback_reason(self, grid: _Evaluation, in_level: np.ndarray, index: int) -> str:
+        """Why the fallback chose ``index`` when every candidate is predicted to collide."""
+        candidates, risk_cost = grid.candidates, grid.costs.risk
+        stops = in_level[candidates.kind[in_level] == CandidateKind.BRAKE]
+        n_invalid = int((grid.levels == Validity.PHYSICALLY_INVALID).sum())
+        reason = (
+            f"every candidate is predicted to collide: {len(in_level)} possible candidates "
+            f"(hard stops included) all meet a predicted mean occupancy ({n_invalid} more "
+            f"break a physical limit); least expected harm by the risk cost (Eq. 6) over all "
+            f"of them: {_describe(candidates, index)}, J_risk {risk_cost[index]:.4g}"
+        )
+        if stops.size and candidates.kind[index] != CandidateKind.BRAKE:
+            best_stop = int(stops[np.argmin(risk_cost[stops])])
+            stop = _describe(candidates, best_stop)
+            reason += f"; best hard stop ({stop}) J_risk {risk_cost[best_stop]:.4g}"
+        return reason
 
     def _record(
         self,
@@ -398,6 +541,7 @@ class Planner:
         index: int,
         reason: str,
         emergency: bool,
+        continued: bool,
         prediction: Prediction,
         road_users: Sequence[RoadUser],
         timings: dict[str, float],
@@ -425,6 +569,9 @@ class Planner:
             planner=self.config.name,
             trajectory=Trajectory.from_candidates(chosen.candidates, index),
             chosen_index=-1 if emergency else index,
+            candidate=CandidateParameters.of(chosen.candidates, index),
+            continued=continued,
+            max_risk_refused=0 if emergency else int(self._refused(grid, index).size),
             level=int(chosen.levels[index]),
             level_counts={int(v): int(c) for v, c in zip(values, counts, strict=True)},
             invalid_counts={k: int(v.sum()) for k, v in grid.invalid.items()},
@@ -453,6 +600,10 @@ def _load_correction(path: str | None) -> DeltaVCorrection | None:
         raise ValueError(f"risk.delta_v_correction: cannot read {path}: {error.strerror}") from None
     except ValueError as error:
         raise ValueError(f"risk.delta_v_correction: {error}") from None
+
+
+def _describe(candidates: Candidates, index: int) -> str:
+    return CandidateParameters.of(candidates, index).describe()
 
 
 def _since(clock: float) -> float:

@@ -10,7 +10,8 @@ Three sources, added and kept below 1 by ``ResponsibilityConfig``:
    line), the collision arises from its violation and k is responsible;
 3. rear-end: the follower of a rear-end collision is responsible.
 
-The collision geometry is taken at the step of the highest collision probability.
+The collision geometry is taken at the first step at which the collision probability
+reaches half its peak (the onset of the potential collision).
 """
 
 from __future__ import annotations
@@ -146,10 +147,12 @@ def responsibilities(
     if k == 0:
         return r_obs, r_ego
     n_t = probability.shape[2]
-    step = probability.argmax(axis=2)  # (n, k)
-    # The highest probability itself: argmax is several times faster than max over this
-    # short last axis, and it is needed anyway.
-    peak = np.take_along_axis(probability, step[..., None], axis=2)[..., 0]
+    # The geometry of the first contact: the first step at which the collision
+    # probability reaches half its peak. (At the peak itself the predicted means may
+    # already overlap deeply and the centres have passed each other: a rear-end would
+    # look like the leader running into the follower.)
+    peak = probability.max(axis=2)  # (n, k)
+    step = np.argmax(probability >= 0.5 * peak[..., None], axis=2)
     # Rows of the (traj, t) and (obs, t) tables at the peak step, gathered flat.
     ego_row = np.arange(n)[:, None] * n_t + step
     obs_row = np.arange(k)[None, :] * n_t + step

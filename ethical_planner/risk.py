@@ -77,13 +77,19 @@ def _eroded_area(area: shapely.Geometry, radius: float) -> shapely.Geometry:
     return cached[1]
 
 
-def outside_drivable_area(candidates: Candidates, shape: Shape, environment: RoadEnvironment) -> np.ndarray:
-    """True where a corner of the ego footprint lies outside the drivable area, shape (n, t).
+def outside_drivable_area(
+    candidates: Candidates, shape: Shape, environment: RoadEnvironment, margin: float = 0.0
+) -> np.ndarray:
+    """True where the ego footprint comes within ``margin`` [m] of the edge, shape (n, t).
 
-    A centre inside the area shrunk by the footprint's half-diagonal has all corners
-    inside, so only the other centres (near the road edge) get the corner test.
+    The footprint grown by ``margin`` on every side must lie inside the drivable area:
+    a plan that skims the kerb is not executable by a controller with a tracking error
+    and a body that yaws. A centre inside the area shrunk by the grown footprint's
+    half-diagonal has all corners inside, so only the other centres (near the road
+    edge) get the corner test.
     """
     area = environment.drivable_area
+    shape = Shape(shape.length + 2.0 * margin, shape.width + 2.0 * margin)
     half_diagonal = 0.5 * float(np.hypot(shape.length, shape.width))
     deep = shapely.contains_xy(_eroded_area(area, half_diagonal), candidates.x, candidates.y)
     outside = np.zeros(candidates.x.shape, dtype=bool)
@@ -124,7 +130,9 @@ def assess_risk(
     # thread beside the collision probability (on small ones the hand-over costs more).
     outside_job = None
     if k and n * n_t >= _OVERLAP_MIN_POSES:
-        outside_job = workers.submit(lambda: outside_drivable_area(candidates, ego_shape, environment))
+        outside_job = workers.submit(
+            lambda: outside_drivable_area(candidates, ego_shape, environment, config.road_edge_margin)
+        )
     cp = collision_probability(
         candidates.x,
         candidates.y,
@@ -162,7 +170,7 @@ def assess_risk(
     peak_step = p.argmax(axis=2) if n_t else np.zeros((n, k), dtype=int)
 
     outside = (
-        outside_drivable_area(candidates, ego_shape, environment)
+        outside_drivable_area(candidates, ego_shape, environment, config.road_edge_margin)
         if outside_job is None
         else outside_job.result()
     )

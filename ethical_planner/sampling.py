@@ -1,25 +1,55 @@
 """Frenet sampling of candidate trajectories (paper Fig. 1, step 1), vectorised.
 
-Longitudinal motion is a quartic s(t) to an end speed with zero end acceleration,
-lateral motion a quintic d(t) to an end offset at rest; both are converted to
-Cartesian states with exact derivatives of the Frenet frame (no finite
-differences), so speed, acceleration and curvature are those of the motion.
+Every candidate is a Frenet motion, s(t) and d(t) with three time derivatives each,
+converted to Cartesian states with exact derivatives of the Frenet frame (no finite
+differences), so speed, acceleration and curvature are those of the motion. Families
+(``CandidateKind``):
+
+- grid (the paper's): a quartic s(t) to an end speed with zero end acceleration, a
+  quintic d(t) to an end offset at rest, for every end speed x end offset x horizon;
+  below ``SamplingConfig.low_speed`` the quintic follows arc length instead of time;
+- brake: a jerk-limited ramp to a constant deceleration, braking to a stop and
+  staying stopped, with a quintic lateral shift in arc length over part of the
+  braking distance;
+- continuation: the previous cycle's plan from where the ego is on it;
+- emergency: braking at the emergency deceleration in the current lane position,
+  the fallback when every other candidate breaks a physical limit.
+
+All families share one time grid, that of the longest horizon, and one struct of
+arrays of shape (n_traj, n_t).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 
-from ethical_planner.config import SamplingConfig
+from ethical_planner.config import SamplingConfig, VehicleConfig
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.road_users import KinematicState
 
 
+class CandidateKind(IntEnum):
+    """Family of a candidate (``Candidates.kind``)."""
+
+    GRID = 0
+    BRAKE = 1
+    CONTINUATION = 2
+    EMERGENCY = 3
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class FrenetState:
-    """Ego state in the Frenet frame of the reference path (time derivatives)."""
+    """Ego state in the Frenet frame of the reference path.
+
+    Attributes:
+        s, d: position [m]. s_dot, d_dot: [m/s]. s_ddot, d_ddot: [m/s^2].
+        d_prime: dd/ds, the heading relative to the path (1 - kappa d) tan(yaw - theta)
+            [1], defined at standstill too.
+        d_prime2: d^2d/ds^2 [1/m] (0 below 1 m/s, where it is ill-defined).
+    """
 
     s: float
     s_dot: float
@@ -27,6 +57,8 @@ class FrenetState:
     d: float
     d_dot: float
     d_ddot: float
+    d_prime: float = 0.0
+    d_prime2: float = 0.0
 
 
 def frenet_state(state: KinematicState, path: ReferencePath) -> FrenetState:
@@ -42,13 +74,20 @@ def frenet_state(state: KinematicState, path: ReferencePath) -> FrenetState:
     one_minus_kd = 1.0 - float(kappa) * d
     if one_minus_kd <= 0.05:
         raise ValueError(f"ego lies {d:.1f} m from the reference path, beyond its radius of curvature")
+    s_dot = state.v * np.cos(delta) / one_minus_kd
+    s_ddot = state.a * np.cos(delta)
+    d_ddot = state.a * np.sin(delta)
+    d_prime = one_minus_kd * float(np.tan(np.clip(delta, -1.2, 1.2)))
+    d_prime2 = (d_ddot - d_prime * s_ddot) / s_dot**2 if s_dot > 1.0 else 0.0
     return FrenetState(
         s=s,
-        s_dot=state.v * np.cos(delta) / one_minus_kd,
-        s_ddot=state.a * np.cos(delta),
+        s_dot=s_dot,
+        s_ddot=s_ddot,
         d=d,
         d_dot=state.v * np.sin(delta),
-        d_ddot=state.a * np.sin(delta),
+        d_ddot=d_ddot,
+        d_prime=d_prime,
+        d_prime2=d_prime2,
     )
 
 
@@ -63,8 +102,13 @@ class Candidates:
         x, y: ego centre [m]. yaw: [rad]. v: speed [m/s]. a: tangential
             acceleration [m/s^2]. kappa: curvature [1/m].
         s, d: Frenet position [m]. s_dot: longitudinal Frenet speed [m/s].
-        end_speed, end_offset, horizon: sampling parameters, shape (n_traj,).
+        end_speed, end_offset, horizon: sampling parameters, shape (n_traj,)
+            (a braking candidate's horizon is its stop time).
+        kind: ``CandidateKind`` of each candidate, shape (n_traj,).
+        deceleration: braking candidates' deceleration [m/s^2], 0 for the others.
         jerk_lon, jerk_lat: integrated squared jerk [m^2/s^5], shape (n_traj,).
+        lon, lat: the Frenet motion, s and d with their first three time
+            derivatives, shape (4, n_traj, n_t) each (for the continuation).
     """
 
     t: np.ndarray
@@ -80,8 +124,12 @@ class Candidates:
     end_speed: np.ndarray
     end_offset: np.ndarray
     horizon: np.ndarray
+    kind: np.ndarray
+    deceleration: np.ndarray
     jerk_lon: np.ndarray
     jerk_lat: np.ndarray
+    lon: np.ndarray
+    lat: np.ndarray
 
     @property
     def n_traj(self) -> int:
@@ -175,30 +223,109 @@ def _polynomial_derivatives(coeffs: np.ndarray, t: np.ndarray, horizon: np.ndarr
     return out
 
 
-def sample_candidates(
-    start: FrenetState,
-    path: ReferencePath,
-    config: SamplingConfig,
-    v_max: float,
-) -> Candidates:
-    """Sample the candidate grid: end speeds x end offsets x horizons.
+def lateral_along_arc(
+    start: FrenetState, d_end: np.ndarray, distance: np.ndarray, lon: np.ndarray
+) -> np.ndarray:
+    """Lateral motion as a quintic in arc length, completed over ``distance``.
 
-    End speeds span [v0 - b T, v0 + a T] clipped to [0, v_max] (b and a from
-    ``config``); end offsets span [d_min, d_max].
+    d(sigma), sigma = s - s0, runs from the start's (d, d', d'') to (d_end, 0, 0) at
+    sigma = distance and holds d_end after it. Time derivatives by the chain rule, with
+    primes for arc length and dots for time: d_t = d' s_t, d_tt = d'' s_t^2 + d' s_tt,
+    d_ttt = d''' s_t^3 + 3 d'' s_t s_tt + d' s_ttt. A shift over less than
+    ``_MIN_LATERAL_DISTANCE`` holds the offset (a standing car cannot move sideways).
 
     Args:
-        start: ego Frenet state.
-        path: reference path.
-        config: grid.
-        v_max: highest end speed [m/s].
+        start: ego Frenet state (d, d_prime, d_prime2 used).
+        d_end: end offsets [m], shape (n,).
+        distance: arc length of the shift [m], shape (n,).
+        lon: (4, n, n_t) s and its time derivatives.
+
+    Returns:
+        (4, n, n_t) d and its first three time derivatives.
     """
-    dt = config.dt
-    t_max = max(config.horizons)
-    n_t = int(round(t_max / dt)) + 1
-    t = np.arange(n_t) * dt
+    s, s_dot, s_ddot, s_dddot = lon
+    n = s.shape[0]
+    short = distance < _MIN_LATERAL_DISTANCE
+    length = np.where(short, 1.0, distance)
+    coeffs = quintic_coefficients(start.d, start.d_prime, start.d_prime2, d_end, length)
+    coeffs[short] = [start.d, 0.0, 0.0, 0.0, 0.0, 0.0]
+    sigma = s - start.s
+    u = np.clip(sigma, 0.0, length[:, None])
+    past = (sigma >= length[:, None]) | short[:, None]
+    c = coeffs.T[:, :, None]  # (6, n, 1)
+    d = c[0] + u * (c[1] + u * (c[2] + u * (c[3] + u * (c[4] + u * c[5]))))
+    d1 = c[1] + u * (2 * c[2] + u * (3 * c[3] + u * (4 * c[4] + u * 5 * c[5])))
+    d2 = 2 * c[2] + u * (6 * c[3] + u * (12 * c[4] + u * 20 * c[5]))
+    d3 = 6 * c[3] + u * (24 * c[4] + u * 60 * c[5])
+    d = np.where(past, np.where(short, start.d, d_end)[:, None], d)
+    d1, d2, d3 = (np.where(past, 0.0, q) for q in (d1, d2, d3))
+    out = np.empty((4, n, s.shape[1]))
+    out[0] = d
+    out[1] = d1 * s_dot
+    out[2] = d2 * s_dot**2 + d1 * s_ddot
+    out[3] = d3 * s_dot**3 + 3.0 * d2 * s_dot * s_ddot + d1 * s_dddot
+    return out
+
+
+def braking_motion(
+    start: FrenetState, decelerations: np.ndarray, t: np.ndarray, max_jerk: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Brake to a stop at constant decelerations after a jerk-limited ramp, then stand.
+
+    The acceleration moves from the current a0 to -b at ``max_jerk``; the speed falls to
+    0 and stays there (no reversing, no creeping).
+
+    Args:
+        start: ego Frenet state (s, s_dot, s_ddot used).
+        decelerations: b [m/s^2], shape (m,), > 0.
+        t: (n_t,) [s].
+        max_jerk: [m/s^3].
+
+    Returns:
+        (lon (4, m, n_t), stop_distance (m,) [m], stop_time (m,) [s]); the stop may lie
+        beyond the grid.
+    """
+    v0, a0 = max(start.s_dot, 0.0), start.s_ddot
+    b = np.asarray(decelerations, dtype=float)[:, None]
+    k = np.where(-b < a0, -max_jerk, max_jerk)  # jerk of the ramp
+    t_j = np.abs(-b - a0) / max_jerk
+    v_j = v0 + a0 * t_j + 0.5 * k * t_j**2
+    s_j = v0 * t_j + 0.5 * a0 * t_j**2 + k * t_j**3 / 6.0
+    # Stop time: in the constant phase if the ramp ends moving, else a root of the ramp.
+    disc = np.sqrt(np.maximum(a0 * a0 - 2.0 * k * v0, 0.0))
+    roots = np.stack([(-a0 - disc) / k, (-a0 + disc) / k])
+    first_root = np.where(roots > 0, roots, np.inf).min(axis=0)
+    t_stop = np.where(v_j > 0, t_j + np.maximum(v_j, 0.0) / b, np.minimum(first_root, t_j))
+    t_stop = np.where(v0 <= 0.0, 0.0, t_stop)
+
+    def motion(time: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        ramp = time <= t_j
+        tau = np.maximum(time - t_j, 0.0)
+        distance = np.where(
+            ramp, v0 * time + 0.5 * a0 * time**2 + k * time**3 / 6.0, s_j + v_j * tau - 0.5 * b * tau**2
+        )
+        speed = np.where(ramp, v0 + a0 * time + 0.5 * k * time**2, v_j - b * tau)
+        return distance, speed, ramp
+
+    tt = np.minimum(t[None, :], t_stop)
+    distance, speed, ramp = motion(tt)
+    moving = t[None, :] < t_stop
+    lon = np.empty((4,) + distance.shape)
+    lon[0] = start.s + distance
+    lon[1] = np.where(moving, np.maximum(speed, 0.0), 0.0)
+    lon[2] = np.where(moving, np.where(ramp, a0 + k * tt, -b), 0.0)
+    lon[3] = np.where(moving & ramp, k, 0.0)
+    stop_distance, _, _ = motion(t_stop)
+    return lon, stop_distance[:, 0], t_stop[:, 0]
+
+
+def _grid_motion(
+    start: FrenetState, t: np.ndarray, config: SamplingConfig, v_max: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The paper's grid: (lon, lat, end_speed, end_offset, horizon), motions (4, n, n_t)."""
     v0 = max(start.s_dot, 0.0)
     speeds, offsets, horizons = [], [], []
-    for horizon in config.horizons:  # one to three horizons, not per trajectory
+    for horizon in config.horizons:  # a few horizons, not per trajectory
         lo = max(0.0, v0 - config.max_end_deceleration * horizon)
         hi = min(v_max, v0 + config.max_end_acceleration * horizon)
         v_grid = np.linspace(lo, max(hi, lo), config.n_speeds)
@@ -210,50 +337,182 @@ def sample_candidates(
     end_speed = np.concatenate(speeds)
     end_offset = np.concatenate(offsets)
     horizon = np.concatenate(horizons)
-
-    lon_coeffs = quartic_coefficients(start.s, start.s_dot, start.s_ddot, end_speed, horizon)
-    lat_coeffs = quintic_coefficients(start.d, start.d_dot, start.d_ddot, end_offset, horizon)
-    out = _empty_states(len(end_speed), n_t)
-    # Blocks of trajectories, not single ones: every temporary then stays small enough to
-    # be reused by the allocator instead of page-faulting in a fresh mapping.
-    for first in range(0, len(end_speed), _BLOCK):
-        block = slice(first, first + _BLOCK)
-        _cartesian_states(
-            t,
-            _polynomial_derivatives(lon_coeffs[block], t, horizon[block]),
-            _polynomial_derivatives(lat_coeffs[block], t, horizon[block]),
-            path,
-            {name: array[block] for name, array in out.items()},
+    lon = _polynomial_derivatives(
+        quartic_coefficients(start.s, start.s_dot, start.s_ddot, end_speed, horizon), t, horizon
+    )
+    if v0 < config.low_speed:
+        # Werling's low-speed mode: the lateral shift follows the distance travelled.
+        at_horizon = np.minimum(np.rint(horizon / config.dt).astype(int), len(t) - 1)
+        distance = lon[0][np.arange(len(horizon)), at_horizon] - start.s
+        lat = lateral_along_arc(start, end_offset, distance, lon)
+    else:
+        lat = _polynomial_derivatives(
+            quintic_coefficients(start.d, start.d_dot, start.d_ddot, end_offset, horizon), t, horizon
         )
-    return _candidates(t, out, end_speed, end_offset, horizon)
+    return lon, lat, end_speed, end_offset, horizon
+
+
+def _brake_motion(start: FrenetState, t: np.ndarray, config: SamplingConfig, vehicle: VehicleConfig) -> tuple:
+    """The braking family as a part for ``_assemble``.
+
+    Every deceleration (``config.brake_decelerations`` below the emergency deceleration,
+    and the emergency deceleration) x every end offset (the grid's and the current one)
+    x every lateral fraction of the braking distance. A standing ego gets one: stay.
+    """
+    emergency = vehicle.emergency_deceleration
+    decels = np.array(sorted({b for b in config.brake_decelerations if b < emergency} | {emergency}))
+    offsets = np.unique(np.append(np.linspace(config.d_min, config.d_max, config.n_offsets), start.d))
+    fractions = np.asarray(config.brake_lateral_fractions)
+    if start.s_dot < _STANDING_SPEED:
+        decels, offsets, fractions = decels[-1:], np.array([start.d]), fractions[-1:]
+    lon_b, stop_distance, stop_time = braking_motion(start, decels, t, vehicle.max_jerk)
+    n_b, n_d, n_f = len(decels), len(offsets), len(fractions)
+    which = np.repeat(np.arange(n_b), n_d * n_f)  # deceleration varies slowest
+    d_end = np.tile(np.repeat(offsets, n_f), n_b)
+    fraction = np.tile(fractions, n_b * n_d)
+    lon = lon_b[:, which]
+    lat = lateral_along_arc(start, d_end, fraction * stop_distance[which], lon)
+    return lon, lat, np.zeros(len(which)), d_end, stop_time[which], CandidateKind.BRAKE, decels[which]
+
+
+def sample_candidates(
+    start: FrenetState,
+    path: ReferencePath,
+    config: SamplingConfig,
+    vehicle: VehicleConfig,
+    previous: PreviousPlan | None = None,
+    max_deviation: float = 0.5,
+) -> Candidates:
+    """Sample every family of candidates (see the module docstring).
+
+    Grid end speeds span [v0 - b T, v0 + a T] clipped to [0, v_max] (b and a from
+    ``config``); end offsets span [d_min, d_max]. The continuation of ``previous`` is
+    the last candidate if the ego is on it (``continue_plan``).
+
+    Args:
+        start: ego Frenet state.
+        path: reference path.
+        config: families and grid.
+        vehicle: the ego's limits (top speed, braking, jerk).
+        previous: the plan chosen in the previous cycle, if any.
+        max_deviation: largest distance [m] and speed difference [m/s] between the ego
+            and ``previous`` at which it is continued.
+    """
+    dt = config.dt
+    n_t = int(round(max(config.horizons) / dt)) + 1
+    t = np.arange(n_t) * dt
+    lon, lat, end_speed, end_offset, horizon = _grid_motion(start, t, config, vehicle.v_max)
+    parts = [(lon, lat, end_speed, end_offset, horizon, CandidateKind.GRID, np.zeros(len(horizon)))]
+    if config.brake_candidates:
+        parts.append(_brake_motion(start, t, config, vehicle))
+    if previous is not None:
+        continued = continue_plan(previous, start, t, max_deviation)
+        if continued is not None:
+            parts.append(continued)
+    return _assemble(t, path, parts)
 
 
 def emergency_braking(
-    start: FrenetState, path: ReferencePath, t: np.ndarray, deceleration: float
+    start: FrenetState, path: ReferencePath, t: np.ndarray, vehicle: VehicleConfig
 ) -> Candidates:
-    """One candidate braking at ``deceleration`` [m/s^2] to a stop in its current lane position.
+    """One candidate braking at the emergency deceleration to a stop in its lane position.
 
-    Its lateral motion comes to rest at the current offset within one second.
+    The braking builds up at ``vehicle.max_jerk``; the lateral motion comes to rest at
+    the current offset over the braking distance.
     """
-    v0 = max(start.s_dot, 0.0)
-    t_stop = v0 / deceleration
-    moving = t < t_stop
-    s = start.s + np.where(moving, v0 * t - 0.5 * deceleration * t**2, 0.5 * v0 * t_stop)
-    lon = np.stack(
-        [
-            s,
-            np.where(moving, v0 - deceleration * t, 0.0),
-            np.where(moving, -deceleration, 0.0),
-            np.zeros_like(t),
-        ]
-    )[:, None, :]
-    settle = np.array([min(1.0, float(t[-1])) if t[-1] > 0 else 1.0])
-    lat = _polynomial_derivatives(
-        quintic_coefficients(start.d, start.d_dot, start.d_ddot, np.array([start.d]), settle),
-        t,
-        settle,
+    decel = np.array([vehicle.emergency_deceleration])
+    lon, stop_distance, stop_time = braking_motion(start, decel, t, vehicle.max_jerk)
+    lat = lateral_along_arc(start, np.array([start.d]), stop_distance, lon)
+    part = (lon, lat, np.zeros(1), np.array([start.d]), stop_time, CandidateKind.EMERGENCY, decel)
+    return _assemble(t, path, [part])
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PreviousPlan:
+    """The plan chosen in the previous cycle, kept for its continuation.
+
+    Attributes:
+        t: its time grid [s], shape (n_t,).
+        lon, lat: its Frenet motion, shape (4, n_t) each (s and d with three derivatives).
+        end_speed, end_offset, horizon, deceleration: its sampling parameters.
+        kind: its family.
+    """
+
+    t: np.ndarray
+    lon: np.ndarray
+    lat: np.ndarray
+    end_speed: float
+    end_offset: float
+    horizon: float
+    deceleration: float
+    kind: CandidateKind
+
+    @classmethod
+    def of(cls, candidates: Candidates, index: int) -> PreviousPlan:
+        """Candidate ``index`` of ``candidates``."""
+        return cls(
+            candidates.t.copy(),
+            candidates.lon[:, index].copy(),
+            candidates.lat[:, index].copy(),
+            float(candidates.end_speed[index]),
+            float(candidates.end_offset[index]),
+            float(candidates.horizon[index]),
+            float(candidates.deceleration[index]),
+            CandidateKind(int(candidates.kind[index])),
+        )
+
+
+def continue_plan(
+    previous: PreviousPlan, start: FrenetState, t: np.ndarray, max_deviation: float
+) -> tuple | None:
+    """The previous plan from where the ego is on it, over the time grid ``t``.
+
+    The time tau since the plan's start is where its s(t) reaches the ego's s; the plan
+    is shifted by tau (whole steps exactly, otherwise linearly interpolated) and held
+    after its end (constant speed along the path, constant offset).
+
+    Returns:
+        A family part for ``_assemble`` with one candidate, or None if the ego is further
+        than ``max_deviation`` from the plan (position [m] or speed [m/s]) or the time
+        steps differ.
+    """
+    if len(previous.t) < 2 or len(t) < 2 or not np.isclose(previous.t[1] - previous.t[0], t[1] - t[0]):
+        return None
+    dt = float(t[1] - t[0])
+    s_prev = previous.lon[0]
+    if not (s_prev[0] - max_deviation <= start.s <= s_prev[-1] + max_deviation):
+        return None
+    i = int(np.clip(np.searchsorted(s_prev, start.s), 1, len(s_prev) - 1))
+    ds = s_prev[i] - s_prev[i - 1]
+    fraction = float(np.clip((start.s - s_prev[i - 1]) / ds, 0.0, 1.0)) if ds > 1e-9 else 0.0
+    tau = float(previous.t[i - 1] + fraction * dt)
+    shifted_t = tau + t
+    steps = tau / dt
+    if abs(steps - round(steps)) < 1e-3:
+        index = np.minimum(np.arange(len(t)) + int(round(steps)), len(previous.t) - 1)
+        lon, lat = previous.lon[:, index].copy(), previous.lat[:, index].copy()
+    else:
+        lon = np.stack([np.interp(shifted_t, previous.t, q) for q in previous.lon])
+        lat = np.stack([np.interp(shifted_t, previous.t, q) for q in previous.lat])
+    beyond = shifted_t > previous.t[-1] + 1e-9
+    if beyond.any():  # hold: constant speed along the path, constant offset
+        extra = shifted_t[beyond] - previous.t[-1]
+        lon[0, beyond] = previous.lon[0, -1] + previous.lon[1, -1] * extra
+        lon[1, beyond] = previous.lon[1, -1]
+        lon[2:, beyond] = 0.0
+        lat[0, beyond] = previous.lat[0, -1]
+        lat[1:, beyond] = 0.0
+    if abs(lat[0, 0] - start.d) > max_deviation or abs(lon[1, 0] - start.s_dot) > max_deviation:
+        return None
+    return (
+        lon[:, None, :],
+        lat[:, None, :],
+        np.array([previous.end_speed]),
+        np.array([previous.end_offset]),
+        np.array([max(previous.horizon - tau, 0.0)]),
+        CandidateKind.CONTINUATION,
+        np.array([previous.deceleration]),
     )
-    return frenet_to_candidates(t, lon, lat, path, np.array([0.0]), np.array([start.d]), np.array([t_stop]))
 
 
 def frenet_to_candidates(
@@ -265,7 +524,7 @@ def frenet_to_candidates(
     end_offset: np.ndarray,
     horizon: np.ndarray,
 ) -> Candidates:
-    """Cartesian candidates from Frenet motion.
+    """Cartesian candidates (kind ``GRID``) from Frenet motion.
 
     Args:
         t: (n_t,) [s].
@@ -276,30 +535,48 @@ def frenet_to_candidates(
         end_offset: (n,) end offsets [m], kept.
         horizon: (n,) horizons [s], kept.
     """
-    out = _empty_states(lon.shape[1], len(t))
-    _cartesian_states(t, lon, lat, path, out)
-    return _candidates(t, out, end_speed, end_offset, horizon)
+    part = (lon, lat, end_speed, end_offset, horizon, CandidateKind.GRID, np.zeros(lon.shape[1]))
+    return _assemble(t, path, [part])
 
 
-#: Trajectories converted per block (see sample_candidates).
+#: Trajectories converted per block (see _assemble).
 _BLOCK = 256
 _STATE_NAMES = ("x", "y", "yaw", "v", "a", "kappa", "s", "d", "s_dot", "jerk_lon", "jerk_lat")
+#: Below this speed [m/s] the ego stands: the braking family collapses to one candidate.
+_STANDING_SPEED = 0.05
+#: Shorter lateral shifts [m] hold the offset (see lateral_along_arc).
+_MIN_LATERAL_DISTANCE = 0.5
 
 
-def _empty_states(n: int, n_t: int) -> dict[str, np.ndarray]:
-    """Uninitialised per-step (n, n_t) and per-candidate (n,) output arrays by name."""
-    return {name: np.empty(n if name.startswith("jerk") else (n, n_t)) for name in _STATE_NAMES}
+def _assemble(t: np.ndarray, path: ReferencePath, parts: list[tuple]) -> Candidates:
+    """Concatenate family parts and convert them to Cartesian candidates.
 
-
-def _candidates(
-    t: np.ndarray,
-    out: dict[str, np.ndarray],
-    end_speed: np.ndarray,
-    end_offset: np.ndarray,
-    horizon: np.ndarray,
-) -> Candidates:
-    """Wrap filled output arrays (see _empty_states) as ``Candidates``."""
-    return Candidates(t=t, end_speed=end_speed, end_offset=end_offset, horizon=horizon, **out)
+    Each part is (lon (4, m, n_t), lat (4, m, n_t), end_speed, end_offset, horizon,
+    kind, deceleration), the per-candidate arrays of shape (m,).
+    """
+    lon = np.concatenate([p[0] for p in parts], axis=1)
+    lat = np.concatenate([p[1] for p in parts], axis=1)
+    end_speed, end_offset, horizon = (np.concatenate([p[i] for p in parts]) for i in (2, 3, 4))
+    kind = np.concatenate([np.full(p[0].shape[1], int(p[5]), dtype=np.int8) for p in parts])
+    deceleration = np.concatenate([p[6] for p in parts])
+    n = lon.shape[1]
+    out = {name: np.empty(n if name.startswith("jerk") else (n, len(t))) for name in _STATE_NAMES}
+    # Blocks of trajectories, not single ones: every temporary then stays small enough to
+    # be reused by the allocator instead of page-faulting in a fresh mapping.
+    for first in range(0, n, _BLOCK):
+        block = slice(first, first + _BLOCK)
+        _cartesian_states(t, lon[:, block], lat[:, block], path, {k: v[block] for k, v in out.items()})
+    return Candidates(
+        t=t,
+        end_speed=end_speed,
+        end_offset=end_offset,
+        horizon=horizon,
+        kind=kind,
+        deceleration=deceleration,
+        lon=lon,
+        lat=lat,
+        **out,
+    )
 
 
 def _cartesian_states(
@@ -373,6 +650,15 @@ def _cartesian_states(
     yaw = out["yaw"]
     np.arctan2(across, along, out=yaw)
     yaw += theta_r
+    standing = moving  # inverted above
+    if standing.any():
+        # A standing car keeps the heading it stopped with (atan2 of two rounding
+        # residues is no heading); one standing from the start points along the path.
+        steps = np.broadcast_to(np.arange(yaw.shape[1]), yaw.shape)
+        last_moving = np.maximum.accumulate(np.where(standing, -1, steps), axis=1)
+        rows = np.arange(yaw.shape[0])[:, None]
+        held = yaw[rows, np.maximum(last_moving, 0)]
+        yaw[...] = np.where(standing, np.where(last_moving >= 0, held, theta_r), yaw)
     out["s"][...] = s
     out["d"][...] = d
     out["s_dot"][...] = s_dot

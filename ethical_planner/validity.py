@@ -6,11 +6,14 @@ from enum import IntEnum
 
 import numpy as np
 
-from ethical_planner.config import VehicleLimits
+from ethical_planner.config import VehicleConfig
 from ethical_planner.sampling import Candidates
 
 #: A small negative Frenet speed tolerated before a candidate counts as reversing [m/s].
 _REVERSE_TOLERANCE = 0.05
+#: Rounding slack of the acceleration limits [m/s^2] (a plan braking at exactly the
+#: emergency deceleration is valid).
+_ACCELERATION_TOLERANCE = 1e-6
 
 
 class Validity(IntEnum):
@@ -23,21 +26,35 @@ class Validity(IntEnum):
     VALID = 10
 
 
-def physically_invalid(candidates: Candidates, limits: VehicleLimits) -> dict[str, np.ndarray]:
-    """Which limit each candidate breaks, shape (n,) per reason.
+#: Reasons of validity level 0, in the order of ``physically_invalid``.
+LIMITS = ("speed", "acceleration", "curvature", "lateral_acceleration", "friction")
 
-    Speed, longitudinal acceleration and curvature are all checked (the reference
-    checks speed twice and never acceleration). Curvature is checked only above
-    ``limits.kappa_check_speed``, since it is ill-defined at standstill.
+
+def physically_invalid(candidates: Candidates, vehicle: VehicleConfig) -> dict[str, np.ndarray]:
+    """Which limit each candidate breaks, shape (n,) per reason (``LIMITS``).
+
+    - speed: above v_max, or reversing;
+    - acceleration: above a_max or braking harder than the emergency deceleration;
+    - curvature: beyond the steering limit tan(delta_max) / wheelbase (kinematic bicycle);
+    - lateral_acceleration: v^2 |kappa| above the tyres' lateral limit;
+    - friction: sqrt(a^2 + (v^2 kappa)^2) outside the friction circle.
+
+    The three curvature-based limits are checked where the speed exceeds
+    ``vehicle.curvature_check_speed`` (the heading of a standing plan is ill-defined).
+    The reference checks speed twice and never acceleration: all are checked here.
     """
+    v, a, kappa = candidates.v, candidates.a, candidates.kappa
+    moving = v > vehicle.curvature_check_speed
+    lateral = np.square(v) * np.abs(kappa)
+    slack = _ACCELERATION_TOLERANCE
     return {
-        "speed": np.any(candidates.v > limits.v_max, axis=1)
-        | np.any(candidates.s_dot < -_REVERSE_TOLERANCE, axis=1),
-        "acceleration": np.any((candidates.a > limits.a_max) | (candidates.a < limits.a_min), axis=1),
-        "curvature": np.any(
-            (np.abs(candidates.kappa) > limits.kappa_max) & (candidates.v > limits.kappa_check_speed),
-            axis=1,
+        "speed": np.any(v > vehicle.v_max, axis=1) | np.any(candidates.s_dot < -_REVERSE_TOLERANCE, axis=1),
+        "acceleration": np.any(
+            (a > vehicle.a_max + slack) | (a < -vehicle.emergency_deceleration - slack), axis=1
         ),
+        "curvature": np.any(moving & (np.abs(kappa) > vehicle.steering_curvature), axis=1),
+        "lateral_acceleration": np.any(moving & (lateral > vehicle.max_lateral_acceleration), axis=1),
+        "friction": np.any(moving & (np.hypot(a, lateral) > vehicle.friction_acceleration + slack), axis=1),
     }
 
 

@@ -46,19 +46,17 @@ MUTANTS = (
     Mutant(
         "accel_removed",
         VALIDITY,
-        '"acceleration": np.any((candidates.a > limits.a_max) | (candidates.a < limits.a_min), axis=1),',
-        "",
+        '"acceleration": np.any(',
+        '"acceleration": False & np.any(',
         (TEST_VALIDITY,),
     ),
-    Mutant("accel_max", VALIDITY, "(candidates.a > limits.a_max) | ", "", (TEST_VALIDITY,)),
-    Mutant("accel_min", VALIDITY, " | (candidates.a < limits.a_min)", "", (TEST_VALIDITY,)),
-    Mutant(
-        "speed_max", VALIDITY, "np.any(candidates.v > limits.v_max, axis=1)\n        | ", "", (TEST_VALIDITY,)
-    ),
+    Mutant("accel_max", VALIDITY, "(a > vehicle.a_max + slack) | ", "", (TEST_VALIDITY,)),
+    Mutant("accel_min", VALIDITY, " | (a < -vehicle.emergency_deceleration - slack)", "", (TEST_VALIDITY,)),
+    Mutant("speed_max", VALIDITY, "np.any(v > vehicle.v_max, axis=1) | ", "", (TEST_VALIDITY,)),
     Mutant(
         "reversing",
         VALIDITY,
-        "\n        | np.any(candidates.s_dot < -_REVERSE_TOLERANCE, axis=1)",
+        " | np.any(candidates.s_dot < -_REVERSE_TOLERANCE, axis=1)",
         "",
         (TEST_VALIDITY,),
     ),
@@ -72,15 +70,36 @@ MUTANTS = (
     Mutant(
         "curvature_gate",
         VALIDITY,
-        " & (candidates.v > limits.kappa_check_speed)",
-        "",
+        "moving = v > vehicle.curvature_check_speed",
+        "moving = v > -1.0",
         (TEST_VALIDITY,),
     ),
     Mutant(
         "curvature_sign",
         VALIDITY,
-        "np.abs(candidates.kappa) > limits.kappa_max",
-        "candidates.kappa > limits.kappa_max",
+        "np.abs(kappa) > vehicle.steering_curvature",
+        "kappa > vehicle.steering_curvature",
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "lateral_removed",
+        VALIDITY,
+        '"lateral_acceleration": np.any(',
+        '"lateral_acceleration": False & np.any(',
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "lateral_sign",
+        VALIDITY,
+        "lateral = np.square(v) * np.abs(kappa)",
+        "lateral = np.square(v) * kappa",
+        (TEST_VALIDITY,),
+    ),
+    Mutant(
+        "friction_removed",
+        VALIDITY,
+        '"friction": np.any(',
+        '"friction": False & np.any(',
         (TEST_VALIDITY,),
     ),
     # --- each validity level removed, and the order of levels
@@ -153,6 +172,14 @@ MUTANTS = (
         "+ weights.ego_risk * ego_combined",
         "- weights.ego_risk * ego_combined",
         (TEST_COST,),
+    ),
+    # --- S_R: the road edge is an entry only for candidates that leave the road
+    Mutant(
+        "road_edge_always_in_s_r",
+        COST,
+        "np.ones((n, 2 * k), dtype=bool), leaves_road[:, None]",
+        "np.ones((n, 2 * k), dtype=bool), np.ones((n, 1), dtype=bool)",
+        (TEST_COST, TEST_PLANNER),
     ),
     Mutant(
         "eq6_below_valid",

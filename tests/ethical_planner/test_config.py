@@ -6,9 +6,21 @@ from ethical_planner.config import PlannerConfig, load_config, preset
 def test_presets_are_small_overrides_of_one_default():
     ethical, selfish, standard = preset("ethical"), preset("selfish"), preset("standard")
     assert ethical == PlannerConfig()
-    assert selfish.weights.ego_risk == 100 and selfish.weights.bayes == 0 and selfish.weights.risk == 250
+    assert selfish.weights.ego_risk == 100 and selfish.weights.bayes == 0
+    assert selfish.weights.risk == ethical.weights.risk
     assert standard.weights.risk == 0
     assert standard.sampling == ethical.sampling and standard.vehicle == ethical.vehicle
+
+
+def test_reference_preset_runs_the_papers_weights():
+    """The reference implementation's parameterisation: w_risk 250, equal principle
+    weights 33.3, gamma 10, R_max 0.05, path weight 10 against the route's lane."""
+    reference = preset("reference")
+    w = reference.weights
+    assert (w.risk, w.bayes, w.equality, w.maximin, w.maximin_gamma) == (250, 33.3, 33.3, 33.3, 10)
+    assert (w.speed, w.path_distance, w.other_lane, w.jerk_lon, w.jerk_lat) == (1, 10, 0, 0.05, 0.05)
+    assert w.path_reference == "route" and reference.risk.max_acceptable_risk == 0.05
+    assert reference.sampling == preset("ethical").sampling
 
 
 def test_unknown_key_is_named(tmp_path):
@@ -27,7 +39,7 @@ def test_toml_overrides_apply(tmp_path):
     assert config.name == "selfish"
     assert config.risk.max_acceptable_risk == 0.02
     assert config.sampling.horizons == (2.0, 3.0)
-    assert config.sampling.n_trajectories == 450
+    assert config.sampling.n_trajectories == 15 * 15 * 2
 
 
 @pytest.mark.parametrize(
@@ -40,7 +52,13 @@ def test_toml_overrides_apply(tmp_path):
         ({"sampling": {"dt": 0.0}}, "dt"),
         ({"sampling": {"d_min": 2.0, "d_max": 1.0}}, "d_min"),
         ({"weights": {"bayes": float("nan")}}, "finite"),
-        ({"vehicle": {"a_min": 1.0}}, "a_min"),
+        ({"vehicle": {"emergency_deceleration": -1.0}}, "vehicle.emergency_deceleration"),
+        ({"vehicle": {"max_steering_angle": 1.6}}, "max_steering_angle"),
+        ({"sampling": {"brake_lateral_fractions": [0.0]}}, "brake_lateral_fractions"),
+        ({"sampling": {"brake_decelerations": [-2.0]}}, "brake_decelerations"),
+        ({"commitment": {"relative_margin": -0.1}}, "commitment.relative_margin"),
+        ({"weights": {"path_reference": "kerb"}}, "weights.path_reference"),
+        ({"prediction": {"turn_rate_time_constant": 0.0}}, "turn_rate_time_constant"),
     ],
 )
 def test_bad_values_are_rejected_with_the_field(overrides, match):
@@ -51,3 +69,16 @@ def test_bad_values_are_rejected_with_the_field(overrides, match):
 def test_unknown_preset():
     with pytest.raises(ValueError, match="allowed: ethical"):
         preset("utilitarian")
+
+
+def test_curvature_limit_follows_the_kinematic_bicycle_and_the_tyres():
+    """kappa_max(v) = min(tan(delta_max) / L, a_lat / v^2): by hand for the BMW 320i."""
+    import math
+
+    import numpy as np
+
+    vehicle = preset("ethical").vehicle
+    steering = math.tan(0.61) / 2.81  # 0.2487 1/m, a turning radius of 4.0 m
+    assert vehicle.steering_curvature == pytest.approx(steering)
+    limits = vehicle.max_curvature(np.array([0.0, 2.0, 14.0]))
+    np.testing.assert_allclose(limits, [steering, steering, 8 / 196])

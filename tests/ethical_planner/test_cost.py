@@ -69,6 +69,7 @@ def test_total_cost_uses_eq5_for_valid_and_eq6_otherwise():
         np.zeros(2),
         np.array([1.5, 1.5]),
         np.zeros(2),
+        np.zeros(2),
         np.array([Validity.VALID, Validity.COLLISION]),
         weights,
     )
@@ -122,6 +123,7 @@ def test_risk_set_is_the_papers_2k_entries_on_the_road():
         np.zeros(2),
         np.zeros(2),
         np.zeros(2),
+        np.zeros(2),
         np.full(2, int(Validity.VALID)),
         weights,
     )
@@ -167,9 +169,47 @@ def test_each_principle_enters_eq7_with_its_sign(weights, j_risk):
         np.zeros(2),
         np.array([1.5, 1.5]),
         np.zeros(2),
+        np.zeros(2),
         np.array([Validity.VALID, Validity.LEAVES_ROAD]),
         w,
     )
     assert costs.risk[0] == pytest.approx(j_risk)
     assert costs.total[0] == pytest.approx(2.0 * j_risk + 3.0 + 2.0 * 1.5)  # Eq. 5
     assert costs.total[1] == pytest.approx(j_risk)  # Eq. 6: risk only below the valid level
+
+
+def test_mobility_by_hand_lane_centres_and_the_lane_preference():
+    """Path term against the nearest lane centre at every step, lane term per lane away.
+
+    Lanes at d = 0 (the route's) and 3.5. A candidate at d = 0.5 throughout: 0.5 m off,
+    0 lanes away; at 3.5 throughout: 0 m off, 1 lane away; one that crosses from 0 to 3.5
+    in the middle of four steps (0, 1.5, 2.0, 3.5): off by (0, 1.5, 1.5, 0) / 4 = 0.75,
+    in the other lane half the time. Against the route (the reference) all offsets count.
+    """
+    from ethical_planner.config import PathReference
+    from ethical_planner.cost import path_deviation
+
+    d = np.array([[0.5, 0.5, 0.5, 0.5], [3.5, 3.5, 3.5, 3.5], [0.0, 1.5, 2.0, 3.5]])
+    deviation, lanes = path_deviation(d, (0.0, 3.5), 3.5, PathReference.LANES)
+    np.testing.assert_allclose(deviation, [0.5, 0.0, 0.75])
+    np.testing.assert_allclose(lanes, [0.0, 1.0, 0.5])
+    deviation, lanes = path_deviation(d, (0.0, 3.5), 3.5, PathReference.ROUTE)
+    np.testing.assert_allclose(deviation, [0.5, 3.5, 7.0 / 4])
+    np.testing.assert_allclose(lanes, 0.0)
+    w = CostWeights(speed=2.0, path_distance=1.0, other_lane=10.0, jerk_lon=0.0, jerk_lat=0.0)
+    costs = total_cost(
+        np.zeros((3, 0)),
+        np.zeros((3, 0), dtype=bool),
+        np.zeros((3, 0)),
+        np.zeros((3, 0)),
+        np.zeros((3, 0), dtype=bool),
+        np.zeros(3),
+        np.zeros(3),
+        np.zeros(3),
+        np.array([1.0, 0.0, 0.0]),
+        np.array([0.5, 0.0, 0.75]),
+        np.array([0.0, 1.0, 0.5]),
+        np.full(3, int(Validity.VALID)),
+        w,
+    )
+    np.testing.assert_allclose(costs.mobility, [2.0 + 0.5, 10.0, 0.75 + 5.0])

@@ -69,8 +69,15 @@ def test_never_returns_nothing_emergency_braking_when_everything_is_invalid():
 def test_decision_record_is_complete_and_json_able():
     situation = overtaking_cyclist()
     decision = Planner(preset("ethical"), situation.environment).plan(situation.ego, situation.road_users)
-    assert sum(decision.level_counts.values()) == len(decision.candidate_levels) == 225
+    config = preset("ethical").sampling
+    # The grid (15 x 15 x 4 horizons), the braking family (4 decelerations x 15 offsets, the
+    # current one among them, x 2 lateral fractions); no continuation in a first cycle.
+    n_brake = 4 * config.n_offsets * len(config.brake_lateral_fractions)
+    assert sum(decision.level_counts.values()) == len(decision.candidate_levels)
+    assert len(decision.candidate_levels) == config.n_trajectories + n_brake == 900 + 120
     record = json.loads(json.dumps(decision.to_dict()))
+    assert record["candidate"]["kind"] in ("grid", "brake") and record["continued"] is False
+    assert set(record["candidate"]) == {"kind", "horizon", "end_speed", "end_offset", "deceleration"}
     assert {"bayes", "equality", "maximin", "responsibility", "risk", "comfort", "mobility", "total"} <= set(
         record["costs"]
     )
@@ -256,3 +263,92 @@ def test_predictor_is_checked_and_named_by_the_registry():
     unknown = preset("ethical").with_overrides({"prediction": {"model": "walenet"}})
     with pytest.raises(ValueError, match="unknown predictor 'walenet'; allowed: .*constant_turn_rate"):
         Planner(unknown, env)
+
+
+def _stopped_truck_ahead(gap):
+    """A single-lane road between walls, the ego at 14 m/s, a stopped truck ``gap`` m ahead."""
+    env = RoadEnvironment.along_path([[-30, 0], [300, 0]], lanes_left=0, margin=0.3)
+    truck_x = 0.5 * EGO_SHAPE.length + gap + 0.5 * DEFAULT_SHAPES[RoadUserType.TRUCK].length
+    truck = RoadUser(
+        1, RoadUserType.TRUCK, KinematicState(truck_x, 0, 0, 0), DEFAULT_SHAPES[RoadUserType.TRUCK]
+    )
+    return env, KinematicState(0, 0, 0, 14.0), [truck], truck_x
+
+
+def test_cause_1_a_hard_stop_that_stays_stopped_saves_the_ego():
+    """Issue 9, cause 1: the hardest braking candidate of the old grid stopped exactly at
+    T = 2 s (10.5 m/s^2 peak, invalid), so the ego rolled into a stopped truck. A braking
+    candidate at the emergency deceleration (8 m/s^2 after a 30 m/s^3 ramp) stops in
+    14.1 m from 14 m/s and stays stopped: with a 16 m gap it is the plan."""
+    env, ego, users, truck_x = _stopped_truck_ahead(gap=16.0)
+    old = preset("ethical").with_overrides(
+        {"sampling": {"horizons": [2.0], "brake_candidates": False}, "commitment": {"enabled": False}}
+    )
+    before = Planner(old, env).plan(ego, users)
+    decision = Planner(preset("ethical"), env).plan(ego, users)
+    # Without a way to stop, the old grid's best was to scrape past the truck off the road.
+    assert before.level <= Validity.LEAVES_ROAD and before.trajectory.v[-1] > 0
+    assert decision.level > Validity.LEAVES_ROAD
+    plan = decision.trajectory
+    assert plan.v[-1] == 0.0 and np.all(plan.v[np.argmax(plan.v == 0) :] == 0)  # stops and stays
+    assert plan.x.max() + 0.5 * EGO_SHAPE.length < truck_x - 5.0  # before the truck's rear
+
+
+def test_cause_1_when_everything_collides_the_least_expected_harm_is_chosen_hard_stops_included():
+    env, ego, users, _ = _stopped_truck_ahead(gap=7.0)
+    planner = Planner(preset("ethical"), env)
+    decision = planner.plan(ego, users)
+    assert decision.level == Validity.COLLISION
+    assert "every candidate is predicted to collide" in decision.reason
+    assert "hard stops included" in decision.reason
+    # The choice is a hard stop: the lowest impact speed, the least harm.
+    assert decision.candidate.kind.name == "BRAKE" and decision.candidate.deceleration >= 6.0
+
+
+def test_cause_1_the_plan_is_kept_unless_another_is_clearly_better():
+    """Commitment: replanning from a state on the previous plan keeps it (hysteresis);
+    an obstacle appearing on it makes the planner switch at once."""
+    situation = overtaking_cyclist()
+    planner = Planner(preset("ethical"), situation.environment)
+    first = planner.plan(situation.ego, situation.road_users)
+    t = first.trajectory
+    on_plan = KinematicState(t.x[1], t.y[1], t.yaw[1], t.v[1], t.a[1])
+    moved = [
+        RoadUser(
+            u.id,
+            u.type,
+            KinematicState(
+                u.state.x + 0.1 * u.state.v * math.cos(u.state.yaw),
+                u.state.y + 0.1 * u.state.v * math.sin(u.state.yaw),
+                u.state.yaw,
+                u.state.v,
+            ),
+            u.shape,
+        )
+        for u in situation.road_users
+    ]
+    second = planner.plan(on_plan, moved)
+    assert second.continued and second.candidate.kind.name == "CONTINUATION"
+    assert second.trajectory.x[:-1] == pytest.approx(t.x[1:], abs=1e-6)
+    # A parked car appears on the continued plan: it is dropped.
+    blocker = RoadUser(
+        9,
+        RoadUserType.PARKED_VEHICLE,
+        KinematicState(t.x[25], t.y[25], 0, 0),
+        DEFAULT_SHAPES[RoadUserType.CAR],
+    )
+    third = planner.plan(on_plan, [*moved, blocker])
+    assert not third.continued
+
+
+def test_cause_4_an_overtake_on_a_clear_road_is_not_punished():
+    """Staying behind a 4 m/s cyclist on an empty two-lane road costs mobility for the
+    whole horizon; measured against the lane it drives in, the overtake wins. The
+    reference weights (path term against the route, weight 10) stay behind."""
+    situation = overtaking_cyclist()
+    cyclist = situation.road_users[0]
+    ethical = Planner(preset("ethical"), situation.environment).plan(situation.ego, [cyclist])
+    reference = Planner(preset("reference"), situation.environment).plan(situation.ego, [cyclist])
+    assert ethical.level == Validity.VALID
+    assert ethical.trajectory.y.max() > 2.5  # into the free lane
+    assert reference.trajectory.y.max() < 1.0  # behind the cyclist

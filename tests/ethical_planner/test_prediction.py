@@ -96,19 +96,23 @@ def test_parked_vehicles_keep_their_initial_uncertainty():
 def _ode_reference(state, times, config):
     """Independent solution of the predictor's motion law with scipy's ODE solver.
 
-    u' = a (braking, until u = 0) or a exp(-t / T_a) (a >= 0); theta' = omega exp(-t / T_w)
-    while moving; p' = u (cos theta, sin theta).
+    Without a history the course is the current heading: the heading deviation e
+    (e(0) = 0, e'(0) = omega) returns critically damped, e'' = -2 e' / T - e / T^2,
+    while moving; u' = a (braking, until u = 0) or a exp(-t / T_a) (a >= 0);
+    p' = u (cos theta, sin theta).
     """
     from scipy.integrate import solve_ivp
 
     t_a, t_w = config.acceleration_time_constant, config.turn_rate_time_constant
 
     def rhs(t, z):
-        x, y, theta, u = z
+        x, y, theta, u, e, e_dot = z
         moving = u > 1e-12
         du = (state.a if state.a < 0 else state.a * math.exp(-t / t_a)) if (moving or state.a > 0) else 0.0
-        dtheta = state.yaw_rate * math.exp(-t / t_w) if moving else 0.0
-        return [u * math.cos(theta), u * math.sin(theta), dtheta, du]
+        e_ddot = -2.0 * e_dot / t_w - e / t_w**2
+        if not moving:
+            e_dot, e_ddot = 0.0, 0.0
+        return [u * math.cos(theta), u * math.sin(theta), e_dot, du, e_dot, e_ddot]
 
     stop = (lambda t, z: z[3]) if state.a < 0 else None
     if stop is not None:
@@ -117,7 +121,7 @@ def _ode_reference(state, times, config):
     sol = solve_ivp(
         rhs,
         (0.0, times[-1]),
-        [state.x, state.y, state.yaw, state.v],
+        [state.x, state.y, state.yaw, state.v, 0.0, state.yaw_rate],
         t_eval=times,
         events=stop,
         rtol=1e-10,
@@ -125,9 +129,9 @@ def _ode_reference(state, times, config):
         max_step=0.01,
     )
     out = np.empty((len(times), 4))
-    out[: sol.y.shape[1]] = sol.y.T
+    out[: sol.y.shape[1]] = sol.y[:4].T
     if sol.y.shape[1] < len(times):  # stopped: stays where it stopped
-        x_stop, y_stop, th_stop, _ = sol.y_events[0][0]
+        x_stop, y_stop, th_stop, _ = sol.y_events[0][0][:4]
         out[sol.y.shape[1] :] = [x_stop, y_stop, th_stop, 0.0]
     return out
 
@@ -177,9 +181,9 @@ def test_turn_rate_decays_so_a_swerve_is_not_a_circle():
     swerving = _car(KinematicState(0, 0, 0, 15.0, yaw_rate=0.3))
     decayed = predict_constant_acceleration([swerving], times, config)
     circle = predict_constant_turn_rate([swerving], times, config)
-    # Total heading change is omega T_w (1 - exp(-t / T_w)) <= omega T_w = 0.24 rad.
-    limit = 0.3 * config.turn_rate_time_constant
-    np.testing.assert_allclose(decayed.heading[0, -1], limit * (1 - math.exp(-3 / 0.8)))
+    # The heading returns to the course: omega t exp(-t / T), at most omega T / e = 0.088 rad.
+    np.testing.assert_allclose(decayed.heading[0], 0.3 * times * np.exp(-times / 0.8), atol=1e-12)
+    assert decayed.heading[0].max() <= 0.3 * 0.8 / math.e + 1e-12
     assert circle.heading[0, -1] == pytest.approx(0.9)
     assert decayed.mean[0, -1, 1] < 0.5 * circle.mean[0, -1, 1]
 
@@ -209,3 +213,67 @@ def test_the_default_predictor_is_constant_acceleration_and_both_are_registered(
     assert {"constant_acceleration", "constant_turn_rate"} <= set(PREDICTORS.names())
     with pytest.raises(ValueError, match="turn_rate_time_constant"):
         PredictionConfig(turn_rate_time_constant=0.0)
+
+
+def _with_history(state, rate_before, uid=1):
+    """A car whose 3 s history turned at ``rate_before`` [rad/s] (10 Hz samples)."""
+    from ethical_planner.road_users import MotionHistory
+
+    times = np.linspace(-3.0, 0.0, 31)
+    headings = state.yaw + rate_before * times
+    history = MotionHistory(times, np.zeros((31, 2)), headings, np.full(31, state.v))
+    return RoadUser(uid, RoadUserType.CAR, state, DEFAULT_SHAPES[RoadUserType.CAR], history=history)
+
+
+def test_a_curve_in_the_history_is_followed_a_fresh_swerve_decays():
+    """The sustained course (fitted to 2.5 to 1 s ago) is kept; a deviation returns to it.
+
+    On a curve (radius 70 m at 12 m/s: 0.171 rad/s for 3 s) the prediction stays on the
+    circle like the constant turn rate; a car that starts turning now (straight before)
+    gets the decaying turn rate.
+    """
+    from ethical_planner.prediction import predict_constant_acceleration
+
+    times = np.linspace(0, 3, 31)
+    config = PredictionConfig()
+    rate = 12.0 / 70.0
+    state = KinematicState(0, 0, 0, 12.0, yaw_rate=rate)
+    on_curve = predict_constant_acceleration([_with_history(state, rate)], times, config)
+    np.testing.assert_allclose(on_curve.heading[0], rate * times, atol=1e-9)
+    np.testing.assert_allclose(
+        np.hypot(on_curve.mean[0, :, 0], on_curve.mean[0, :, 1] - 70.0), 70.0, atol=5e-3
+    )
+    fresh = predict_constant_acceleration([_with_history(state, 0.0)], times, config)
+    np.testing.assert_allclose(fresh.heading[0], rate * times * np.exp(-times / 0.8), atol=1e-9)
+    # A curve that is ending (turning less now) is followed at the current, lower rate;
+    # a swing the other way is not a curve at all.
+    ending = predict_constant_acceleration(
+        [_with_history(KinematicState(0, 0, 0, 12.0, yaw_rate=0.05), rate)], times, config
+    )
+    np.testing.assert_allclose(ending.heading[0], 0.05 * times, atol=1e-9)
+    swing = predict_constant_acceleration(
+        [_with_history(KinematicState(0, 0, 0, 12.0, yaw_rate=-0.05), rate)], times, config
+    )
+    np.testing.assert_allclose(swing.heading[0], -0.05 * times * np.exp(-times / 0.8), atol=1e-9)
+
+
+def test_a_drift_returns_to_its_course():
+    """A car 0.2 rad off the course its history shows (and still turning away at 0.1
+    rad/s) straightens out: its heading relaxes to the course, its lateral excursion is
+    bounded by v (e0 2T + e1 T^2) instead of growing with the horizon."""
+    from ethical_planner.prediction import predict_constant_acceleration
+
+    times = np.linspace(0, 3, 31)
+    config = PredictionConfig()
+    drifting = _with_history(KinematicState(0, 0, 0.2, 15.0, yaw_rate=0.1), 0.0)
+    # The history's headings are those of a car on course 0.2 rad earlier: rebuild it on course 0.
+    from ethical_planner.road_users import MotionHistory
+
+    history = MotionHistory(np.linspace(-3, 0, 31), np.zeros((31, 2)), np.zeros(31), np.full(31, 15.0))
+    drifting = RoadUser(1, RoadUserType.CAR, drifting.state, drifting.shape, history=history)
+    pred = predict_constant_acceleration([drifting], times, config)
+    t_w = config.turn_rate_time_constant
+    expected = (0.2 + (0.2 / t_w + 0.1) * times) * np.exp(-times / t_w)
+    np.testing.assert_allclose(pred.heading[0], expected, atol=1e-9)
+    bound = 15.0 * (0.2 * 2 * t_w + 0.1 * t_w**2)
+    assert pred.mean[0, -1, 1] < bound

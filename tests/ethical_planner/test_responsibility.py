@@ -75,9 +75,15 @@ def test_rear_end_follower_is_responsible():
     env = RoadEnvironment.along_path([[-30, 0], [200, 0]], lanes_left=1)
     slow_ahead = RoadUser(1, "car", KinematicState(12.0, 0.0, 0.0, 2.0), DEFAULT_SHAPES[RoadUserType.CAR])
     fast_behind = RoadUser(2, "car", KinematicState(-10.0, 0.0, 0.0, 14.0), DEFAULT_SHAPES[RoadUserType.CAR])
-    planner = Planner(preset("standard"), env)
-    ahead = planner.plan(KinematicState(0, 0, 0, 12.0), [slow_ahead]).road_users[0]
-    behind = planner.plan(KinematicState(0, 0, 0, 3.0), [fast_behind]).road_users[0]
+    # Straight candidates only: the collision geometry is a rear-end whatever is chosen.
+    straight = preset("standard").with_overrides(
+        {
+            "sampling": {"n_offsets": 1, "d_min": 0.0, "d_max": 0.0, "brake_candidates": False},
+            "commitment": {"enabled": False},
+        }
+    )
+    ahead = Planner(straight, env).plan(KinematicState(0, 0, 0, 12.0), [slow_ahead]).road_users[0]
+    behind = Planner(straight, env).plan(KinematicState(0, 0, 0, 3.0), [fast_behind]).road_users[0]
     # r_base = 0.1 (1 - exp(-m / 5000 kg)); a 4.5 m x 1.8 m car weighs
     # -1333.5 + 526.9 * 8.1^0.8 = 1475.27 kg (SPEC), the ego 1475 kg
     base_car, base_ego = 0.0255509, 0.0255468

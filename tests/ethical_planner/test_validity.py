@@ -9,13 +9,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ethical_planner.config import VehicleLimits, preset
+from ethical_planner.config import VehicleConfig, preset
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.planner import Planner
 from ethical_planner.road_users import KinematicState
-from ethical_planner.validity import Validity, physically_invalid, validity_levels
+from ethical_planner.validity import LIMITS, Validity, physically_invalid, validity_levels
 
-LIMITS = VehicleLimits(v_max=30.0, a_max=5.0, a_min=-9.0, kappa_max=0.2, kappa_check_speed=1.0)
+VEHICLE = VehicleConfig(v_max=30.0)
 
 
 def _candidates(rows):
@@ -30,28 +30,49 @@ def _candidates(rows):
     return SimpleNamespace(v=v, a=a, kappa=kappa, s_dot=s_dot)
 
 
-#: (row, the limits it breaks): each just inside or just beyond one limit of LIMITS.
+#: (row, the limits it breaks): each just inside or just beyond one limit of VEHICLE
+#: (BMW 320i: steering tan(0.61) / 2.81 = 0.2487 1/m, 8 m/s^2 lateral, friction circle
+#: 8.8 m/s^2, a_max 5, emergency deceleration 8, v_max 30 here).
 ROWS = [
     ((10.0, 0.0, 0.0, 10.0), set()),
-    ((29.9, 4.9, 0.19, 29.9), set()),  # everything just inside
+    ((29.9, 4.9, 0.0, 29.9), set()),  # speed and acceleration just inside
     ((30.1, 0.0, 0.0, 30.1), {"speed"}),
     ((10.0, 5.1, 0.0, 10.0), {"acceleration"}),  # longitudinal acceleration above a_max
-    ((10.0, -9.1, 0.0, 10.0), {"acceleration"}),  # braking harder than a_min
-    ((10.0, -8.9, 0.0, 10.0), set()),
-    ((10.0, 0.0, 0.21, 10.0), {"curvature"}),
-    ((10.0, 0.0, -0.21, 10.0), {"curvature"}),  # either direction
-    ((0.5, 0.0, 0.5, 0.5), set()),  # tight curvature at walking pace is not checked
-    ((1.5, 0.0, 0.5, 1.5), {"curvature"}),
+    ((10.0, -8.1, 0.0, 10.0), {"acceleration"}),  # braking harder than the emergency deceleration
+    ((10.0, -8.0, 0.0, 10.0), set()),  # braking at exactly the emergency deceleration
+    ((1.3, 0.0, 0.24, 1.3), set()),  # steering: 0.24 < 0.2487 at walking pace
+    ((1.3, 0.0, 0.26, 1.3), {"curvature"}),
+    ((1.3, 0.0, -0.26, 1.3), {"curvature"}),  # either direction
+    ((0.05, 0.0, 5.0, 0.05), set()),  # a standing plan's curvature is not checked
+    ((14.0, 0.0, 0.040, 14.0), set()),  # tyres at 14 m/s: 8 / 196 = 0.0408 1/m
+    ((14.0, 0.0, -0.042, 14.0), {"lateral_acceleration"}),
+    ((14.0, 0.0, 0.1, 14.0), {"lateral_acceleration", "friction"}),  # the old 0.2 let it pass
+    ((10.0, -7.0, 0.05, 10.0), set()),  # friction: hypot(7, 5) = 8.60 < 8.8
+    ((10.0, -8.0, 0.04, 10.0), {"friction"}),  # hypot(8, 4) = 8.94
+    ((10.0, 5.0, -0.075, 10.0), {"friction"}),  # hypot(5, 7.5) = 9.01 on its own
     ((3.0, 0.0, 0.0, -0.1), {"speed"}),  # reversing along the path
     ((3.0, 0.0, 0.0, -0.04), set()),  # within the reversing tolerance
 ]
 
 
 def test_each_limit_of_level_0_by_hand():
-    reasons = physically_invalid(_candidates([r for r, _ in ROWS]), LIMITS)
-    assert set(reasons) == {"speed", "acceleration", "curvature"}
+    reasons = physically_invalid(_candidates([r for r, _ in ROWS]), VEHICLE)
+    assert set(reasons) == set(LIMITS)
     for i, (_, broken) in enumerate(ROWS):
         assert {name for name, flags in reasons.items() if flags[i]} == broken, ROWS[i]
+
+
+def test_curvature_limit_is_a_function_of_speed():
+    """kappa_max(v) = min(tan(delta_max) / L, a_lat / v^2): by hand, and the check uses it."""
+    steering = np.tan(0.61) / 2.81
+    speeds = np.array([1.0, 5.0, 5.7, 10.0, 20.0])
+    expected = np.minimum(steering, 8.0 / speeds**2)
+    np.testing.assert_allclose(VEHICLE.max_curvature(speeds), expected)
+    just_in = [(v, 0.0, 0.999 * k, v) for v, k in zip(speeds, expected, strict=True)]
+    just_out = [(v, 0.0, 1.001 * k, v) for v, k in zip(speeds, expected, strict=True)]
+    inside = np.any(list(physically_invalid(_candidates(just_in), VEHICLE).values()), axis=0)
+    outside = np.any(list(physically_invalid(_candidates(just_out), VEHICLE).values()), axis=0)
+    assert not inside.any() and outside.all()
 
 
 def _levels(**override):
@@ -83,8 +104,8 @@ def test_every_level_and_their_order_by_hand():
 
 
 def test_each_reason_alone_makes_a_candidate_physically_invalid():
-    for reason in ("speed", "acceleration"):
-        flags = {"speed": np.zeros(7, bool), "acceleration": np.zeros(7, bool)}
+    for reason in LIMITS:
+        flags = {name: np.zeros(7, bool) for name in LIMITS}
         flags[reason][0] = True
         assert _levels(invalid_reasons=flags)[0] == Validity.PHYSICALLY_INVALID
 
@@ -113,9 +134,13 @@ def test_planner_never_accelerates_beyond_a_max():
     assert decision.trajectory.v[-1] > 5.0  # it still accelerates as hard as allowed
 
 
-def test_planner_never_brakes_harder_than_a_min():
+def test_planner_never_brakes_harder_than_the_emergency_deceleration():
     decision = _plan(
-        {"desired_speed": 0.0, "sampling": {"max_end_deceleration": 12.0}, "vehicle": {"a_min": -4.0}},
+        {
+            "desired_speed": 0.0,
+            "sampling": {"max_end_deceleration": 12.0},
+            "vehicle": {"emergency_deceleration": 4.0},
+        },
         KinematicState(0, 0, 0, 20.0),
     )
     assert decision.level == Validity.VALID
@@ -134,29 +159,44 @@ def test_planner_never_exceeds_v_max():
     assert decision.trajectory.v[-1] > 29.0
 
 
-def test_planner_never_exceeds_kappa_max():
+def test_planner_never_exceeds_the_lateral_acceleration():
     # 3 m off the reference path, with a heavy weight on returning: sharp returns bend
-    # beyond kappa_max = 0.02 1/m at 10 m/s and must be refused.
+    # beyond 2 m/s^2 / (10 m/s)^2 = 0.02 1/m at 10 m/s and must be refused.
     decision = _plan(
-        {"vehicle": {"kappa_max": 0.02}, "weights": {"path_distance": 100.0}},
+        {
+            "vehicle": {"max_lateral_acceleration": 2.0},
+            "weights": {"path_distance": 100.0, "path_reference": "route"},
+        },
         KinematicState(0, 3.0, 0, 10.0),
     )
     assert decision.level == Validity.VALID
     assert decision.level_counts[int(Validity.PHYSICALLY_INVALID)] > 0
-    assert np.abs(decision.trajectory.kappa).max() <= 0.02 + 1e-9
+    lateral = decision.trajectory.v**2 * np.abs(decision.trajectory.kappa)
+    assert lateral.max() <= 2.0 + 1e-9
     assert abs(decision.trajectory.y[-1]) < 3.0  # it still heads back
 
 
-@pytest.mark.parametrize("limit", ["a_max", "v_max", "kappa_max"])
+@pytest.mark.parametrize("limit", ["a_max", "v_max", "max_lateral_acceleration"])
 def test_without_the_limit_the_planner_would_break_it(limit):
     """The three planner tests above are not vacuous: with a loose limit the same plan breaks it."""
-    loose = {"a_max": 50.0, "v_max": 100.0, "kappa_max": 5.0}[limit]
+    loose = {
+        "a_max": {"a_max": 8.5},
+        "v_max": {"v_max": 100.0},
+        "max_lateral_acceleration": {"max_lateral_acceleration": 8.0},
+    }[limit]
     cases = {
         "a_max": ({"desired_speed": 30.0, "sampling": {"max_end_acceleration": 12.0}}, (0, 0.0), "a", 5.0),
         "v_max": ({"desired_speed": 40.0, "sampling": {"max_end_acceleration": 2.0}}, (0, 28.0), "v", 30.0),
-        "kappa_max": ({"weights": {"path_distance": 100.0}}, (3.0, 10.0), "kappa", 0.02),
+        "max_lateral_acceleration": (
+            {"weights": {"path_distance": 100.0, "path_reference": "route"}},
+            (3.0, 10.0),
+            "lateral",
+            2.0,
+        ),
     }
     overrides, (y, v), field, bound = cases[limit]
-    overrides = overrides | {"vehicle": {limit: loose}}
+    overrides = overrides | {"vehicle": loose}
     decision = _plan(overrides, KinematicState(0, y, 0, v))
-    assert np.abs(getattr(decision.trajectory, field)).max() > bound
+    trajectory = decision.trajectory
+    values = trajectory.v**2 * np.abs(trajectory.kappa) if field == "lateral" else getattr(trajectory, field)
+    assert np.abs(values).max() > bound

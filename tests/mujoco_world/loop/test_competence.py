@@ -50,9 +50,9 @@ def test_cause_3_a_braking_lead_is_predicted_to_stop_where_it_stops():
 
 
 def test_cause_3_a_drift_is_not_extrapolated_to_the_kerb():
-    """oncoming_drift: early in the drift (turn rate near its peak), the decayed turn
-    rate predicts the drifter's lateral position 2 s ahead far better than the constant
-    turn rate, which drives it on a circle through the ego lane to the kerb."""
+    """oncoming_drift: early in the drift (turn rate near its peak) the default predictor
+    puts the drifter 2 s ahead where it is, in the ego lane; the constant turn rate
+    drives it on a circle through the ego lane to the kerb."""
     scenario = get_scenario("oncoming_drift")
     drifter = scenario.road_users[0]
     scenario = dataclasses.replace(
@@ -71,6 +71,36 @@ def test_cause_3_a_drift_is_not_extrapolated_to_the_kerb():
     _advance(world, 2.0)
     actual = world.positions[1, 1]
     # Measured: the circle ends 5.2 m beyond the drifter's final offset (past the ego
-    # lane, at the kerb); the decayed turn rate 2.8 m (heading extrapolation without a
-    # map cannot know that the drifter straightens out).
-    assert abs(decayed - actual) < abs(circle - actual) - 2.0
+    # lane, at the kerb); the drift returning to the course of the drifter's history
+    # (straight along its lane) ends 0.4 m off.
+    assert abs(decayed - actual) < 0.6
+    assert abs(circle - actual) > 4.0
+
+
+def _ego_collisions(summary):
+    return [c for c in summary.collisions if c.involves_ego]
+
+
+@pytest.mark.parametrize(
+    "name,duration",
+    [
+        # Cause 1 (commitment, hard stops) and cause 2 (short horizons): a pedestrian steps
+        # out from behind a van; braking after 4.1 s always hits, a committed 1 m swerve
+        # (a 1 s lateral move covers 0.5 m in 0.5 s) does not.
+        ("pedestrian_behind_parked", 7.0),
+        # Causes 1 and 2: the cyclist swerves out of the truck's way into the ego lane;
+        # the truck-cyclist crash itself is unavoidable, the ego's is not.
+        ("turning_truck_cyclist", 8.0),
+        # Causes 1 and 3: the lead brakes at 7.5 m/s^2 with a tailgater 0.4 s behind.
+        ("tailgater_sudden_stop", 7.0),
+    ],
+)
+def test_causes_1_2_the_ego_avoids_what_the_old_planner_hit(name, duration):
+    from mujoco_world.loop.runner import run_scenario
+
+    scenario = dataclasses.replace(get_scenario(name), duration=duration)
+    summary = run_scenario(scenario, "ethical", seed=0)
+    assert summary.outcome != "failed", summary.reason
+    assert not _ego_collisions(summary), [
+        (c.measurement.a.name, c.measurement.b.name) for c in summary.collisions
+    ]
