@@ -209,6 +209,70 @@ def run_benchmark(
     return rows
 
 
+def with_history(users: tuple[RoadUser, ...], seconds: float = 3.0, step: float = 0.1) -> list[RoadUser]:
+    """The road users with a constant-velocity history (as the world observes them)."""
+    from dataclasses import replace
+
+    from ethical_planner.road_users import MotionHistory
+
+    times = np.arange(-seconds, 1e-9, step)
+    out = []
+    for user in users:
+        s = user.state
+        direction = np.array([np.cos(s.yaw), np.sin(s.yaw)])
+        positions = np.array([s.x, s.y]) + times[:, None] * s.v * direction
+        history = MotionHistory(times, positions, np.full(len(times), s.yaw), np.full(len(times), s.v))
+        out.append(replace(user, history=history))
+    return out
+
+
+def time_predictors(n_road_users: int = 20, repetitions: int = 20, horizon: float = 3.0) -> list[dict]:
+    """Time one prediction of ``n_road_users`` (3 s of history each) per registered predictor.
+
+    The learned predictor runs on one torch thread (``PredictionConfig.torch_threads``);
+    it is skipped where torch or its weights are missing.
+    """
+    from ethical_planner.config import PredictionConfig
+    from ethical_planner.prediction import PREDICTORS, make_predictor
+
+    users = with_history(bench_scene(n_road_users).road_users)
+    times = np.arange(0.0, horizon + 1e-9, 0.1)
+    rows = []
+    for name in PREDICTORS.names():
+        try:
+            predictor = make_predictor(PredictionConfig(model=name, torch_threads=1))
+        except (ImportError, ValueError) as error:
+            rows.append(
+                {"kind": "prediction", "predictor": name, "road_users": n_road_users, "skipped": str(error)}
+            )
+            continue
+        timing = time_call(lambda p=predictor: p.predict(users, times), repetitions)
+        rows.append(
+            {
+                "kind": "prediction",
+                "predictor": name,
+                "road_users": n_road_users,
+                "median_ms": round(timing["median_ms"], 3),
+                "p90_ms": round(timing["p90_ms"], 3),
+            }
+        )
+    return rows
+
+
+def format_prediction_table(rows: list[dict]) -> str:
+    """Plain-text table of ``time_predictors`` rows."""
+    lines = [f"{'predictor':>20} {'road users':>10} {'median':>10} {'p90':>10}"]
+    for r in rows:
+        if "skipped" in r:
+            lines.append(f"{r['predictor']:>20} {r['road_users']:>10}   skipped: {r['skipped']}")
+        else:
+            lines.append(
+                f"{r['predictor']:>20} {r['road_users']:>10} {r['median_ms']:>7.2f} ms {r['p90_ms']:>7.2f} ms"
+            )
+    lines.append("one prediction over 3 s at 0.1 s, one thread; 10 Hz planning allows 100 ms per cycle")
+    return "\n".join(lines)
+
+
 def format_table(rows: list[dict]) -> str:
     """Plain-text table of ``run_benchmark`` rows."""
     header = (

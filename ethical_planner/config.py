@@ -194,6 +194,13 @@ class PredictionConfig:
     both directions instead of the growth terms. Eigenvalues below ``covariance_floor``
     [m^2] are raised to it.
 
+    ``learned_weights`` is the weights file of the ``"learned"`` predictor (empty: the
+    shipped weights); ``torch_threads`` its torch intra-op threads (set explicitly so
+    that a pool of planner processes does not oversubscribe the cores);
+    ``learned_recalibration`` applies the weights file's coverage recalibration (off by
+    default: on held-out locations it brings the 1-sigma coverage to nominal but
+    under-covers the 2-sigma ellipse and raises the NLL; README, learned predictor).
+
     Attributes:
         model: predictor name.
         sigma0_long, sigma0_lat: standard deviations at t = 0 [m].
@@ -222,6 +229,9 @@ class PredictionConfig:
     """
 
     model: str = "constant_acceleration"
+    learned_weights: str = ""
+    torch_threads: int = 1
+    learned_recalibration: bool = False
 
     sigma0_long: float = 0.3
     sigma0_lat: float = 0.2
@@ -248,6 +258,10 @@ class PredictionConfig:
         check(self.covariance_floor > 0, "prediction.covariance_floor must be > 0 m^2")
         for name in ("turn_rate_time_constant", "acceleration_time_constant"):
             check(getattr(self, name) > 0, f"prediction.{name} must be > 0 s")
+        check(
+            isinstance(self.torch_threads, int) and self.torch_threads >= 1,
+            f"prediction.torch_threads must be an integer >= 1, got {self.torch_threads!r}",
+        )
         window = tuple(float(w) for w in self.sustained_turn_window)
         check(
             len(window) == 2 and all(math.isfinite(w) for w in window) and window[0] > window[1] >= 0,

@@ -5,7 +5,7 @@ each implementation is one module that registers itself on import. The default
 (``PredictionConfig.model``) is ``constant_acceleration``.
 """
 
-from ethical_planner.prediction import constant_acceleration, constant_turn_rate
+from ethical_planner.prediction import constant_acceleration, constant_turn_rate, learned
 from ethical_planner.prediction.base import (
     PREDICTORS,
     Prediction,
@@ -31,6 +31,7 @@ __all__ = [
     "constant_acceleration",
     "constant_turn_rate",
     "empty_prediction",
+    "learned",
     "make_predictor",
     "predict_constant_acceleration",
     "predict_constant_turn_rate",

@@ -1,7 +1,8 @@
 """The ``etp`` command line (the application layer): one module per command group.
 
 ``planner`` (harm, plan), ``bench``, ``world`` (scenarios, run, demo), ``runs``
-(near-crash, replay) and ``impacts`` (impacts, refit-harm) each register their
+(near-crash, replay), ``impacts`` (impacts, refit-harm) and ``predictor`` (train, eval)
+each register their
 subcommands here. Nothing below this package imports it.
 """
 
@@ -15,6 +16,7 @@ from importlib import metadata
 from harm_calibration.cli import bench as bench_cli
 from harm_calibration.cli import impacts as cli_impacts
 from harm_calibration.cli import planner as planner_cli
+from harm_calibration.cli import predictor as predictor_cli
 from harm_calibration.cli import runs as runs_cli
 from harm_calibration.cli import world as world_cli
 from harm_calibration.cli.process import keep_freed_memory
@@ -43,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     world_cli.register(subparsers)
     runs_cli.register(subparsers)
     cli_impacts.register(subparsers)
+    predictor_cli.register(subparsers)
     return parser
 
 

@@ -26,7 +26,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from benchmarks.planning_cycle import format_table, run_benchmark
+    from benchmarks.planning_cycle import (
+        format_prediction_table,
+        format_table,
+        run_benchmark,
+        time_predictors,
+    )
 
     if args.repetitions < 1:
         raise ValueError(f"--repetitions must be >= 1, got {args.repetitions}")
@@ -41,6 +46,8 @@ def _bench(args: argparse.Namespace) -> int:
         print_json(rows)
     else:
         print(format_table(rows))
+        print()
+        print(format_prediction_table(time_predictors(20, args.repetitions)))
     if args.out is not None:
         args.out.write_text(json.dumps(rows, indent=2), encoding="utf-8")
         say(args, f"wrote {args.out}")

@@ -60,6 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--replan-rate", type=float, default=10.0, help="planning cycles per second [Hz]")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_json(p)
+    _predictor_argument(p)
     _recording_arguments(p)
     p.set_defaults(handler=_run)
 
@@ -89,8 +90,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_json(p)
+    _predictor_argument(p)
     _recording_arguments(p)
     p.set_defaults(handler=_demo)
+
+
+def _predictor_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--predictor",
+        default=None,
+        help="predictor of the planner (constant_acceleration, constant_turn_rate, learned; "
+        "default: the planner configuration's)",
+    )
+
+
+def _run_config(args: argparse.Namespace, **fields: object):  # noqa: ANN202 - RunConfig, imported lazily
+    from ethical_planner.prediction import PREDICTORS
+    from mujoco_world.loop.runner import RunConfig
+
+    if args.predictor is not None:
+        PREDICTORS.get(args.predictor)  # raises ValueError listing the registered predictors
+    return RunConfig(predictor=args.predictor, **fields)
 
 
 def _recording_arguments(parser: argparse.ArgumentParser) -> None:
@@ -169,7 +189,7 @@ def _progress_observer(label: str, enabled: bool):
 
 def _run(args: argparse.Namespace) -> int:
     from mujoco_world.loop.batch import RunTask, write_json
-    from mujoco_world.loop.runner import ObserverGroup, RunConfig, run_scenario
+    from mujoco_world.loop.runner import ObserverGroup, run_scenario
     from mujoco_world.loop.world import ObservationNoise
     from mujoco_world.scenario.sources import resolve_scenario
     from mujoco_world.storage.run_folder import recording_observer
@@ -177,7 +197,7 @@ def _run(args: argparse.Namespace) -> int:
     _non_negative(args.seed, "--seed")
     (planner,) = planner_configs([args.planner], args.config)
     scenario = resolve_scenario(args.scenario)
-    config = RunConfig(noise=ObservationNoise(position=args.noise), replan_rate=args.replan_rate)
+    config = _run_config(args, noise=ObservationNoise(position=args.noise), replan_rate=args.replan_rate)
     root = output_dir(args.out)
     task = RunTask(args.scenario, planner.name, args.seed, str(root), planner_config=planner)
     recorder = recording_observer(
@@ -262,7 +282,11 @@ def _demo(args: argparse.Namespace) -> int:
     tasks = make_tasks(scenarios, planners, seeds, root, record=not args.no_record, keep=args.keep_recordings)
     start = time.perf_counter()
     rows = run_batch(
-        tasks, workers=args.workers, progress=show_progress(args), worker_initializer=keep_freed_memory
+        tasks,
+        workers=args.workers,
+        config=_run_config(args) if args.predictor is not None else None,
+        progress=show_progress(args),
+        worker_initializer=keep_freed_memory,
     )
     wall = time.perf_counter() - start
     path = write_aggregate(root, rows, wall)

@@ -12,6 +12,7 @@ without touching the loop.
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import math
 import time
@@ -57,6 +58,8 @@ class RunConfig:
         distance_interval: physics steps between minimum-distance checks.
         control_interval: physics steps between controller updates (10: 100 Hz).
         control: tracking controller.
+        predictor: name of a registered predictor that replaces the planner
+            configuration's ``[prediction] model`` (None keeps it).
     """
 
     replan_rate: float = 10.0
@@ -70,6 +73,7 @@ class RunConfig:
     distance_interval: int = 10
     control_interval: int = 10
     control: ControlConfig = field(default_factory=ControlConfig)
+    predictor: str | None = None
 
     def __post_init__(self) -> None:
         check_positive(
@@ -286,6 +290,9 @@ def run_scenario(
     config = config or RunConfig()
     observer = observer or RunObserver()
     planner_config = preset(planner) if isinstance(planner, str) else planner
+    if config.predictor is not None:
+        prediction = dataclasses.replace(planner_config.prediction, model=config.predictor)
+        planner_config = dataclasses.replace(planner_config, prediction=prediction)
     wall_start = time.perf_counter()
     world = World(
         scenario, config.control, 1.0 / config.behaviour_rate, config.timestep, config.control_interval

@@ -16,9 +16,18 @@ from tests.harm_calibration.cli.conftest import FOLLOW, write_scenario
 
 
 def _subcommands() -> dict[str, argparse.ArgumentParser]:
-    parser = build_parser()
-    (action,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    return dict(action.choices)
+    """Every leaf command by its full name ("predictor train" for a command group)."""
+
+    def leaves(parser: argparse.ArgumentParser, prefix: str) -> dict[str, argparse.ArgumentParser]:
+        groups = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if not groups:
+            return {prefix: parser}
+        out = {}
+        for name, sub in groups[0].choices.items():
+            out |= leaves(sub, f"{prefix} {name}".strip())
+        return out
+
+    return leaves(build_parser(), "")
 
 
 def test_version(capsys):
