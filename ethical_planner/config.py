@@ -28,6 +28,13 @@ from ethical_planner.validation import (
     parse_enum,
 )
 
+#: Bounds of the candidate grid: end speeds or offsets per horizon, planning step [s],
+#: horizon [s], and candidates x steps per cycle (each point costs ~1 kB of arrays).
+MAX_GRID_SIDE = 200
+MIN_DT, MAX_DT = 0.001, 1.0
+MAX_HORIZON = 20.0
+MAX_GRID_POINTS = 2_000_000
+
 
 @dataclass(frozen=True, slots=True)
 class SamplingConfig:
@@ -82,18 +89,29 @@ class SamplingConfig:
 
     def __post_init__(self) -> None:
         check_numeric_fields_finite("sampling", self)
-        check(self.n_speeds >= 1, "sampling.n_speeds must be >= 1")
-        check(self.n_offsets >= 1, "sampling.n_offsets must be >= 1")
+        for name in ("n_speeds", "n_offsets"):
+            value = getattr(self, name)
+            check(
+                isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= MAX_GRID_SIDE,
+                f"sampling.{name} must be an integer in 1..{MAX_GRID_SIDE}, got {value!r}",
+            )
         check(self.d_min <= self.d_max, "sampling.d_min must be <= sampling.d_max")
         for name in ("horizons", "brake_decelerations", "brake_lateral_fractions"):
             object.__setattr__(self, name, tuple(float(h) for h in getattr(self, name)))
         check(len(self.horizons) >= 1, "sampling.horizons must name at least one horizon")
-        check(self.dt > 0, f"sampling.dt must be > 0 s, got {self.dt}")
+        check(MIN_DT <= self.dt <= MAX_DT, f"sampling.dt must lie in [{MIN_DT}, {MAX_DT}] s, got {self.dt}")
         for horizon in self.horizons:
             check(
-                math.isfinite(horizon) and horizon >= self.dt,
-                f"sampling.horizons must be finite and >= dt ({self.dt} s), got {horizon}",
+                math.isfinite(horizon) and self.dt <= horizon <= MAX_HORIZON,
+                f"sampling.horizons must lie in [dt ({self.dt} s), {MAX_HORIZON} s], got {horizon}",
             )
+        steps = int(round(max(self.horizons) / self.dt)) + 1
+        points = self.n_trajectories * steps
+        check(
+            points <= MAX_GRID_POINTS,
+            f"sampling.n_speeds x n_offsets x steps = {self.n_trajectories} x {steps} = {points} points per "
+            f"cycle; at most {MAX_GRID_POINTS} (fewer end speeds or offsets, or a larger dt)",
+        )
         check(
             self.max_end_acceleration > 0 and self.max_end_deceleration > 0,
             "sampling.max_end_acceleration and max_end_deceleration must be > 0 m/s^2",

@@ -178,6 +178,16 @@ class DeltaVCorrection:
         missing = [k for k in _REQUIRED if k not in data]
         if missing:
             raise ValueError(f"DeltaVCorrection: missing keys {missing}")
+        for key, rows in (
+            ("angle_edges_deg", False),
+            ("offset_edges", False),
+            ("factors", True),
+            ("n_train", True),
+        ):
+            value = data.get(key, [])
+            if not isinstance(value, list) or (rows and not all(isinstance(row, list) for row in value)):
+                shape = "a list of rows (lists of numbers)" if rows else "a list of numbers"
+                raise ValueError(f"DeltaVCorrection.{key} must be {shape}, got {value!r}")
         return cls(
             tuple(data["angle_edges_deg"]),
             tuple(data["offset_edges"]),
@@ -198,8 +208,13 @@ class DeltaVCorrection:
         """
         try:
             data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except json.JSONDecodeError as error:
+            raise ValueError(f"{path}: not valid JSON: {error}") from None
+        except UnicodeDecodeError as error:
+            raise ValueError(f"{path}: not UTF-8 text (byte {error.start})") from None
+        try:
             return cls.from_dict(data)
-        except (json.JSONDecodeError, ValueError) as error:
+        except ValueError as error:
             raise ValueError(f"{path}: {error}") from None
 
 

@@ -178,8 +178,14 @@ def _convert(tp: Any, value: Any, path: str, current: Any = None) -> Any:
         return tuple(value)
     if tp is int and (isinstance(value, bool) or not isinstance(value, int)):
         raise ValueError(f"{path} must be an integer, got {value!r}")
-    if tp is float and isinstance(value, int) and not isinstance(value, bool):
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"{path} must be a finite number, got {value!r}")
         return float(value)
+    if tp is bool and not isinstance(value, bool):
+        raise ValueError(f"{path} must be true or false, got {value!r}")
+    if tp is str and not isinstance(value, str):
+        raise ValueError(f"{path} must be a string, got {value!r}")
     return value
 
 

@@ -2,8 +2,9 @@
 
 Run from the repository root (not collected by pytest)::
 
-    python tests/mutation_check.py            # every mutant
-    python tests/mutation_check.py accel_max  # the named ones
+    python tests/mutation_check.py                               # every mutant
+    python tests/mutation_check.py accel_max                     # the named ones
+    python tests/mutation_check.py -k planner_never accel_max    # only tests matching -k
 
 Each mutant replaces one exact piece of source (it must occur exactly once; a mutant
 whose text is gone after a refactor is reported as ``stale``, so update it here) in a
@@ -206,8 +207,11 @@ def _copy_repository(target: Path) -> None:
             shutil.copy2(source, target / name)
 
 
-def run(mutants: tuple[Mutant, ...]) -> int:
-    """Apply each mutant in turn to a scratch copy, run its tests; return the survivors' count."""
+def run(mutants: tuple[Mutant, ...], select: str | None = None) -> int:
+    """Apply each mutant in turn to a scratch copy, run its tests; return the survivors' count.
+
+    ``select`` narrows the tests with pytest's ``-k``.
+    """
     survivors = 0
     with tempfile.TemporaryDirectory(prefix="etp-mutants-") as scratch:
         copy = Path(scratch)
@@ -222,7 +226,17 @@ def run(mutants: tuple[Mutant, ...]) -> int:
             path.write_text(original.replace(mutant.old, mutant.new), encoding="utf-8")
             start = time.perf_counter()
             result = subprocess.run(
-                [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *mutant.tests],
+                [
+                    sys.executable,
+                    "-m",
+                    "pytest",
+                    "-x",
+                    "-q",
+                    "-p",
+                    "no:cacheprovider",
+                    *(["-k", select] if select else []),
+                    *mutant.tests,
+                ],  # fmt: skip
                 cwd=copy,
                 capture_output=True,
                 text=True,
@@ -242,5 +256,9 @@ def run(mutants: tuple[Mutant, ...]) -> int:
 
 
 if __name__ == "__main__":
-    chosen = tuple(m for m in MUTANTS if len(sys.argv) == 1 or m.name in sys.argv[1:])
-    sys.exit(1 if run(chosen) else 0)
+    names = sys.argv[1:]
+    expression = None
+    if names[:1] == ["-k"]:
+        expression, names = names[1], names[2:]
+    chosen = tuple(m for m in MUTANTS if not names or m.name in names)
+    sys.exit(1 if run(chosen, expression) else 0)

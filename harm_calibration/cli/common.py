@@ -159,7 +159,7 @@ def planner_configs(names: Sequence[str], config: Path | None) -> list:
                 f"--config {config}: risk.delta_v_correction: cannot read {path}: {error.strerror}"
             ) from None
         except ValueError as error:
-            raise ValueError(f"--config {config}: risk.delta_v_correction {path}: {error}") from None
+            raise ValueError(f"--config {config}: risk.delta_v_correction: {error}") from None
     return configs
 
 

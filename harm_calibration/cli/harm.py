@@ -22,6 +22,8 @@ from ethical_planner.harm import (
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, UNPROTECTED_TYPES, RoadUserType, mass_of
 from harm_calibration.cli.common import add_json, print_json
 
+#: Largest delta-v asked about [m/s] (a 360 km/h closing speed).
+MAX_DV = 100.0
 #: Named impact areas and their direction in the road user's frame [deg], + = left.
 _NAMED_AREAS_DEG = {
     "front": 0.0,
@@ -118,8 +120,10 @@ def _run(args: argparse.Namespace) -> int:
     partner = RoadUserType.parse(args.partner)
     model = _resolve_model(args.model, partner)
     angle = _area_angle(args.area, model)
-    if not (math.isfinite(args.ego_mass) and args.ego_mass > 0):
-        raise ValueError(f"--ego-mass must be a finite mass > 0 kg, got {args.ego_mass}")
+    if not 0.0 <= args.dv <= MAX_DV:
+        raise ValueError(f"--dv must lie in [0, {MAX_DV:g}] m/s, got {args.dv}")
+    if not 100.0 <= args.ego_mass <= 60000.0:
+        raise ValueError(f"--ego-mass must lie in [100, 60000] kg, got {args.ego_mass}")
     probability = float(harm(model, args.dv, angle))
     c = coefficients(model)
     shape = DEFAULT_SHAPES[partner]

@@ -195,6 +195,10 @@ def _run(args: argparse.Namespace) -> int:
     from mujoco_world.storage.run_folder import recording_observer
 
     _non_negative(args.seed, "--seed")
+    check(0.0 <= args.noise <= 10.0, f"--noise must lie in [0, 10] m, got {args.noise}")
+    check(
+        0.5 <= args.replan_rate <= 100.0, f"--replan-rate must lie in [0.5, 100] Hz, got {args.replan_rate}"
+    )
     (planner,) = planner_configs([args.planner], args.config)
     scenario = resolve_scenario(args.scenario)
     config = _run_config(args, noise=ObservationNoise(position=args.noise), replan_rate=args.replan_rate)

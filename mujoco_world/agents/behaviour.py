@@ -78,29 +78,43 @@ class RouteTable:
     """Routes of several bodies, resampled by arc length into padded arrays.
 
     Beyond its end a route continues straight (``ReferencePath`` semantics); before
-    its start it is clamped.
+    its start it is clamped. Bodies on the same route (equal polylines, e.g. every car
+    of one lane) share one smoothed path and one table row, so building the table
+    costs one path per distinct route, not one per body.
 
     Attributes:
-        paths: the smoothed ``ReferencePath`` of each route.
+        paths: the smoothed ``ReferencePath`` of each body's route (shared objects).
         length: (k,) route lengths [m].
-        x, y, theta, kappa: (k, n) samples every ``ROUTE_STEP_M``.
+        x, y, theta, kappa: (m, n) samples every ``ROUTE_STEP_M`` of the m distinct routes.
     """
 
     def __init__(self, polylines: Sequence[np.ndarray]) -> None:
-        self.paths = tuple(ReferencePath.from_polyline(p) for p in polylines)
+        distinct: dict[bytes, int] = {}
+        unique: list[np.ndarray] = []
+        row_of = []
+        for polyline in polylines:
+            points = np.ascontiguousarray(polyline, dtype=float)
+            key = points.shape[0].to_bytes(8, "little") + points.tobytes()
+            if key not in distinct:
+                distinct[key] = len(unique)
+                unique.append(points)
+            row_of.append(distinct[key])
+        self._row_of = np.array(row_of, dtype=np.int64)
+        shared = [ReferencePath.from_polyline(p) for p in unique]
+        self.paths = tuple(shared[i] for i in row_of)
         self.length = np.array([p.length for p in self.paths])
-        n = int(math.ceil((float(self.length.max(initial=0.0)) + ROUTE_EXTENSION_M) / ROUTE_STEP_M)) + 2
+        longest = max((p.length for p in shared), default=0.0)
+        n = int(math.ceil((float(longest) + ROUTE_EXTENSION_M) / ROUTE_STEP_M)) + 2
         s = np.arange(n) * ROUTE_STEP_M
-        k = len(self.paths)
-        self._table = np.zeros((k, n, 4))  # x, y, theta, kappa
-        for i, path in enumerate(self.paths):
+        self._table = np.zeros((len(shared), n, 4))  # x, y, theta, kappa
+        for i, path in enumerate(shared):
             x, y, theta, kappa, _ = path.evaluate(s)
             self._table[i] = np.column_stack([x, y, theta, kappa])
         self.x, self.y, self.theta, self.kappa = (self._table[:, :, j] for j in range(4))
         self._n = n
 
     def lookup(self, rows: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Pose of routes ``rows`` at arc lengths ``s`` (same shape, any).
+        """Pose of the routes of bodies ``rows`` at arc lengths ``s`` (same shape, any).
 
         Returns:
             (x, y, theta, kappa), each of the shape of ``s``.
@@ -108,8 +122,9 @@ class RouteTable:
         u = np.clip(s, 0.0, (self._n - 1.001) * ROUTE_STEP_M) / ROUTE_STEP_M
         i = u.astype(np.int64)
         f = (u - i)[..., None]
-        lo = self._table[rows, i]
-        out = lo + f * (self._table[rows, i + 1] - lo)
+        table_rows = self._row_of[rows]
+        lo = self._table[table_rows, i]
+        out = lo + f * (self._table[table_rows, i + 1] - lo)
         return out[..., 0], out[..., 1], out[..., 2], out[..., 3]
 
 

@@ -38,6 +38,72 @@ def knots(owner: str, name: str, value: Any) -> tuple[tuple[float, float], ...]:
     return pairs
 
 
+#: Plausible range of every physical quantity of a scenario: (low, high, unit). A value
+#: outside is rejected by name (``check_plausible``); the table is the documentation
+#: (``mujoco_world/README.md`` lists it, a test keeps the two equal).
+RANGES: dict[str, tuple[float, float, str]] = {
+    "scenario.duration": (0.1, 3600.0, "s"),
+    "road.length": (10.0, 20000.0, "m"),
+    "road.lane_width": (2.0, 6.0, "m"),
+    "road.speed_limit": (1.0, 70.0, "m/s"),
+    "road.parking_width": (0.0, 5.0, "m"),
+    "road.shoulder": (0.0, 10.0, "m"),
+    "road.radius": (5.0, 10000.0, "m"),
+    "road.lead_in": (0.0, 20000.0, "m"),
+    "road.corner_radius": (0.0, 50.0, "m"),
+    "route.offset": (-20.0, 20.0, "m"),
+    "idm.time_headway": (0.0, 10.0, "s"),
+    "idm.min_gap": (0.0, 50.0, "m"),
+    "idm.max_acceleration": (0.1, 10.0, "m/s^2"),
+    "idm.comfort_deceleration": (0.1, 10.0, "m/s^2"),
+    "idm.max_deceleration": (0.1, 15.0, "m/s^2"),
+    "idm.reaction_time": (0.0, 3.0, "s"),
+    "idm.look_ahead": (1.0, 1000.0, "m"),
+    "crossing.wait_at": (0.0, 20000.0, "m"),
+    "crossing.gap_time": (0.0, 60.0, "s"),
+    "crossing.corridor": (0.5, 100.0, "m"),
+    "behaviour.speed": (0.0, 70.0, "m/s"),
+    "behaviour.start_time": (0.0, 3600.0, "s"),
+    "behaviour.trigger_distance": (0.1, 1000.0, "m"),
+    "behaviour.speed_profile": (0.0, 70.0, "m/s"),
+    "behaviour.lateral": (-20.0, 20.0, "m"),
+    "legal.speed_limit": (0.0, 70.0, "m/s"),
+    "legal.lateral_half_width": (0.0, 20.0, "m"),
+    "road_user.s0": (0.0, 20000.0, "m"),
+    "road_user.length": (0.2, 25.0, "m"),
+    "road_user.width": (0.2, 4.0, "m"),
+    "road_user.mass": (20.0, 60000.0, "kg"),
+    "ego.length": (1.0, 25.0, "m"),
+    "ego.width": (0.5, 4.0, "m"),
+    "ego.mass": (100.0, 60000.0, "kg"),
+    "ego.s0": (0.0, 20000.0, "m"),
+    "ego.speed": (0.0, 70.0, "m/s"),
+    "ego.desired_speed": (0.0, 70.0, "m/s"),
+    "contact.timeconst": (0.002, 1.0, "s"),
+    "contact.dampratio": (0.1, 100.0, "-"),
+    "contact.friction": (0.0, 2.0, "-"),
+    "sensor.range": (1.0, 2000.0, "m"),
+}
+#: Most road users of one scenario (``Scenario.road_users``).
+MAX_ROAD_USERS = 2000
+
+
+def check_plausible(owner: str, record: object) -> None:
+    """Raise a ValueError naming ``owner.field`` for a value outside its ``RANGES`` entry.
+
+    Knot lists (``speed_profile``, ``lateral``) are checked value by value; None passes.
+    """
+    for key, (low, high, unit) in RANGES.items():
+        prefix, name = key.split(".")
+        if prefix != owner:
+            continue
+        value = getattr(record, name)
+        values = [v for _, v in value] if isinstance(value, tuple) else [value]
+        for v in values:
+            if v is not None and not low <= v <= high:
+                raise ValueError(f"{key} must lie in [{low:g}, {high:g}] {unit}, got {v!r}")
+
+
 class RoadKind(StrEnum):
     """Road layout."""
 
@@ -137,6 +203,7 @@ class RoadSpec:
             corner_radius=self.corner_radius,
         )
         check_finite("road", curve_angle=self.curve_angle)
+        check_plausible("road", self)
         check(
             isinstance(self.lanes, int) and 1 <= self.lanes <= 8,
             f"road.lanes must be an integer in 1..8, got {self.lanes!r}",
@@ -202,6 +269,7 @@ class RouteSpec:
         )
         check(self.direction in (1, -1), f"route.direction must be 1 or -1, got {self.direction!r}")
         check_finite("route", offset=self.offset)
+        check_plausible("route", self)
         try:
             points = tuple((float(x), float(y)) for x, y in self.waypoints)
         except (TypeError, ValueError):
@@ -260,6 +328,7 @@ class IdmSpec:
             look_ahead=self.look_ahead,
         )
         check_finite("idm", stop_at=self.stop_at)
+        check_plausible("idm", self)
         check(
             not math.isnan(self.stop_until) and self.stop_until >= 0,
             f"idm.stop_until must be >= 0 s (inf allowed), got {self.stop_until}",
@@ -283,6 +352,7 @@ class CrossingSpec:
     def __post_init__(self) -> None:
         check_non_negative("crossing", wait_at=self.wait_at, gap_time=self.gap_time)
         check_positive("crossing", corridor=self.corridor)
+        check_plausible("crossing", self)
 
 
 @dataclass(frozen=True, slots=True)
@@ -326,6 +396,7 @@ class BehaviourSpec:
         )
         object.__setattr__(self, "speed_profile", profile)
         object.__setattr__(self, "lateral", knots("behaviour", "lateral", self.lateral))
+        check_plausible("behaviour", self)
         if kind is BehaviourKind.IDM:
             if self.idm is None:
                 object.__setattr__(self, "idm", IdmSpec())
@@ -366,6 +437,7 @@ class LegalSpec:
     def __post_init__(self) -> None:
         check_non_negative("legal", speed_limit=self.speed_limit, lateral_half_width=self.lateral_half_width)
         check_finite("legal", stop_line=self.stop_line)
+        check_plausible("legal", self)
         check(
             not math.isnan(self.stop_until) and self.stop_until >= 0,
             f"legal.stop_until must be >= 0 s (inf allowed), got {self.stop_until}",
@@ -407,6 +479,7 @@ class RoadUserSpec:
         object.__setattr__(self, "type", parse_enum(RoadUserType, self.type, "road-user type", "type"))
         check_finite("road_user", s0=self.s0)
         check_positive("road_user", length=self.length, width=self.width, mass=self.mass)
+        check_plausible("road_user", self)
         if self.type is RoadUserType.TRAIN:
             raise ValueError("type: trains are not supported as road users in mujoco_world")
 
@@ -453,6 +526,7 @@ class EgoSpec:
         check_positive("ego", length=self.length, width=self.width, mass=self.mass)
         check_non_negative("ego", speed=self.speed, desired_speed=self.desired_speed)
         check_finite("ego", s0=self.s0, goal_s=self.goal_s)
+        check_plausible("ego", self)
         check(
             isinstance(self.lane, int) and self.lane >= 0,
             f"ego.lane must be an integer >= 0, got {self.lane!r}",
@@ -502,6 +576,7 @@ class ContactSpec:
     def __post_init__(self) -> None:
         check_positive("contact", timeconst=self.timeconst, dampratio=self.dampratio)
         check_non_negative("contact", friction=self.friction)
+        check_plausible("contact", self)
         check(self.timeconst >= 0.002, "contact.timeconst must be >= 0.002 s (2 time steps)")
         seen = set()
         for r in self.restitution:
@@ -529,6 +604,7 @@ class SensorSpec:
             f"sensor.occlusion must be true or false, got {self.occlusion!r}",
         )
         check_positive("sensor", range=self.range)
+        check_plausible("sensor", self)
 
 
 @dataclass(frozen=True, slots=True)
@@ -563,6 +639,22 @@ class Scenario:
             f"name must be a non-empty string of letters, digits, _ - ., got {self.name!r}",
         )
         check_positive("scenario", duration=self.duration)
+        check_plausible("scenario", self)
+        check(
+            len(self.road_users) <= MAX_ROAD_USERS,
+            f"road_users: at most {MAX_ROAD_USERS} road users per scenario, got {len(self.road_users)}",
+        )
+        length = self.road.length
+        check(
+            self.ego.s0 < length,
+            f"ego.s0 must lie on the road (< road.length {length:g} m), got {self.ego.s0}",
+        )
+        if self.ego.goal_s is not None:
+            check(
+                self.ego.s0 < self.ego.goal_s <= length,
+                f"ego.goal_s must lie between ego.s0 ({self.ego.s0:g} m) and road.length ({length:g} m), "
+                f"got {self.ego.goal_s}",
+            )
         object.__setattr__(self, "road_users", tuple(self.road_users))
         names = [u.name for u in self.road_users]
         duplicates = sorted({n for n in names if names.count(n) > 1})
@@ -578,6 +670,11 @@ class Scenario:
         for i, user in enumerate(self.road_users):
             where = f"road_users[{i}] ({user.name})"
             route = user.route
+            if route.road is not RoadName.WAYPOINTS:
+                check(
+                    user.s0 <= length,
+                    f"{where}.s0 must lie on its road (<= road.length {length:g} m), got {user.s0}",
+                )
             if route.road is not RoadName.WAYPOINTS:
                 check(
                     route.lane < lanes,

@@ -34,6 +34,7 @@ thresholds.collision_probability``. Severity score (higher is worse):
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -124,9 +125,57 @@ class IndexRow:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> IndexRow:
-        """Row from a decoded JSON line; unknown keys are ignored (newer writers)."""
+        """Row from a decoded JSON line; unknown keys are ignored (newer writers).
+
+        Raises:
+            ValueError: not a JSON object, a missing field, or a field of the wrong kind
+                (the message names the field).
+        """
+        if not isinstance(data, dict):
+            raise ValueError(f"not a JSON object, got {type(data).__name__}")
         names = set(cls.__slots__)
-        return cls(**{k: _decode(v) for k, v in data.items() if k in names})
+        values = {k: _decode(v) for k, v in data.items() if k in names}
+        missing = [f.name for f in dataclasses.fields(cls) if f.name not in values and _required(f)]
+        if missing:
+            raise ValueError(f"missing {', '.join(missing)}")
+        for name, value in values.items():
+            kinds = _FIELD_KINDS.get(name)
+            if kinds is None:
+                continue
+            is_bool = isinstance(value, bool)  # a bool is an int to isinstance; here it is not
+            if (is_bool and bool not in kinds) or (
+                not is_bool and (bool in kinds or not isinstance(value, kinds))
+            ):
+                what = {str: "a string", int: "an integer", float: "a number", bool: "true or false"}
+                what |= {dict: "a table", type(None): "null"}
+                wanted = " or ".join(what[k] for k in kinds if not (k is int and float in kinds))
+                raise ValueError(f"{name} must be {wanted}, got {value!r}")
+        return cls(**values)
+
+
+def _required(f: dataclasses.Field) -> bool:
+    return f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+
+
+#: Allowed JSON kinds of each index field (after "inf"/"nan" strings became floats).
+_FIELD_KINDS: dict[str, tuple[type, ...]] = {
+    "run_id": (str,),
+    "scenario": (str,),
+    "planner": (str,),
+    "seed": (int,),
+    "outcome": (str,),
+    "collisions": (int,),
+    "max_harm_measured": (int, float),
+    "max_harm_predicted": (int, float),
+    "min_distance": (int, float),
+    "min_ttc": (int, float),
+    "max_collision_probability": (int, float),
+    "max_risk": (dict,),
+    "near_crash": (bool,),
+    "severity": (int, float),
+    "recording": (str, type(None)),
+    "duration": (int, float),
+}
 
 
 def _encode(value: Any) -> Any:
@@ -353,29 +402,41 @@ def append_row(out_root: str | Path, row: IndexRow) -> Path:
 
 
 def read_index(out_root: str | Path) -> list[IndexRow]:
-    """Every readable row of ``out_root/index.jsonl`` (or of that file itself).
+    """The runs of ``out_root/index.jsonl`` (or of that file itself), one row per run id.
 
-    A truncated or corrupt line (an interrupted writer) is skipped.
+    A run indexed more than once (an interrupted attempt, then its rerun) appears once,
+    with its latest row, at the place of its first. A line that is not JSON (a writer
+    killed mid-line) is skipped.
 
     Raises:
-        ValueError: the index file does not exist.
+        ValueError: the index file does not exist or cannot be read, or a JSON line is
+            not an index row (the message names the file, the line and the field).
     """
     path = Path(out_root)
-    if path.is_dir():
+    if path.is_dir() and path.name != INDEX_FILE:
         path = path / INDEX_FILE
     if not path.is_file():
         raise ValueError(f"root: no run index at {path}")
-    rows = []
-    with path.open("rb") as handle:
-        for line in handle:
+    rows: dict[str, IndexRow] = {}
+    try:
+        handle = path.open("rb")
+    except OSError as error:
+        raise ValueError(f"{path}: cannot read: {error.strerror}") from None
+    with handle:
+        for number, line in enumerate(handle, start=1):
             line = line.strip()
             if not line:
                 continue
             try:
-                rows.append(IndexRow.from_dict(json.loads(line)))
-            except (ValueError, TypeError):
-                continue
-    return rows
+                data = json.loads(line)
+            except ValueError:
+                continue  # a truncated line
+            try:
+                row = IndexRow.from_dict(data)
+            except (ValueError, TypeError) as error:
+                raise ValueError(f"{path} line {number}: {error}") from None
+            rows[row.run_id] = row  # the latest row, in the place of the first
+    return list(rows.values())
 
 
 def near_crashes(rows: Iterable[IndexRow], top: int | None = None) -> list[IndexRow]:

@@ -89,14 +89,14 @@ def test_every_vehicle_model_answers(capsys, model):
         (["--dv", "12", "--area", "13"], "clock position 1..12"),
         (["--dv", "12"], "model reduced_sym needs --area"),
         (["--dv", "12", "--area", "side", "--model", "complete"], "'side' is ambiguous"),
-        (["--dv", "-3", "--area", "front"], r"dv must be finite and >= 0 \[m/s\]"),
-        (["--dv", "nan", "--area", "front"], "dv must be finite"),
+        (["--dv", "-3", "--area", "front"], r"--dv must lie in \[0, 100\] m/s"),
+        (["--dv", "nan", "--area", "front"], r"--dv must lie in \[0, 100\] m/s, got nan"),
         (["--dv", "12", "--model", "lr4"], "unknown harm model 'lr4'; allowed: ignore_angle"),
         (["--dv", "12", "--partner", "dog"], "unknown road-user type 'dog'; allowed: car"),
         (["--dv", "12", "--partner", "pedestrian", "--model", "reduced_sym"],
          "allowed: pedestrian_mais3, pedestrian_mais2"),
         (["--dv", "12", "--model", "pedestrian_mais3"], "partner car is protected"),
-        (["--dv", "12", "--area", "rear", "--ego-mass", "0"], "--ego-mass must be"),
+        (["--dv", "12", "--area", "rear", "--ego-mass", "0"], "--ego-mass must lie in"),
     ],
 )  # fmt: skip
 def test_bad_values_exit_2_with_allowed_values(capsys, argv, message):

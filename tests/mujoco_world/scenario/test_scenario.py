@@ -2,6 +2,7 @@
 
 import dataclasses
 import math
+import re
 from importlib import resources
 
 import numpy as np
@@ -198,3 +199,47 @@ def test_scenarios_are_frozen():
     with pytest.raises(dataclasses.FrozenInstanceError):
         scenario.duration = 3.0  # type: ignore[misc]
     assert isinstance(scenario, Scenario)
+
+
+def test_the_readme_lists_every_plausible_range():
+    from pathlib import Path
+
+    from mujoco_world.scenario.spec import RANGES
+
+    readme = (Path(__file__).resolve().parents[3] / "mujoco_world" / "README.md").read_text()
+    listed = re.findall(r"^\| `([a-z0-9_.]+)` \| ([-0-9.e]+) \.\. ([-0-9.e]+) \| (\S+) \|$", readme, re.M)
+    assert {k: (float(lo), float(hi), unit) for k, lo, hi, unit in listed} == RANGES
+
+
+@pytest.mark.parametrize(
+    ("where", "value", "message"),
+    [
+        (("road", "length"), 0.001, "road.length must lie in [10, 20000] m, got 0.001"),
+        (("ego", "mass"), 1e30, "ego.mass must lie in [100, 60000] kg"),
+        (("ego", "s0"), -50.0, "ego.s0 must lie in [0, 20000] m"),
+        (("ego", "goal_s"), 5000.0, "ego.goal_s must lie between ego.s0 (5 m) and road.length (100 m)"),
+        (("road", "speed_limit"), 1e-9, "road.speed_limit must lie in [1, 70] m/s"),
+        (("contact", "friction"), 3.0, "contact.friction must lie in [0, 2]"),
+    ],
+)
+def test_implausible_values_are_refused_by_name(where, value, message):
+    data = minimal()
+    data.setdefault(where[0], {})[where[1]] = value
+    with pytest.raises(ValueError, match=re.escape(message)):
+        scenario_from_dict(data)
+
+
+def test_each_range_bound_is_inclusive_and_a_step_beyond_is_refused():
+    from mujoco_world.scenario.spec import RANGES
+
+    for key in ("road.lane_width", "ego.speed", "contact.timeconst"):
+        owner, name = key.split(".")
+        low, high, _ = RANGES[key]
+        for ok in (low, high):
+            data = minimal()
+            data.setdefault(owner, {})[name] = ok
+            scenario_from_dict(data)
+        data = minimal()
+        data.setdefault(owner, {})[name] = high * 1.001 + 1e-9
+        with pytest.raises(ValueError, match=re.escape(f"{key} must lie in")):
+            scenario_from_dict(data)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 
@@ -77,6 +78,16 @@ def test_index_survives_truncated_last_line(tmp_path):
     rows = read_index(tmp_path)
     assert [r.run_id for r in rows] == ["a", "b", "d"]
     assert rows[0].min_ttc == math.inf
+
+
+def test_a_run_indexed_twice_is_listed_once_with_its_latest_row(tmp_path):
+    # an interrupted attempt (failed), another run, then the rerun of the first
+    append_row(tmp_path, dataclasses.replace(row("a", True, 0.9), outcome="failed"))
+    append_row(tmp_path, row("b", False, 0.0))
+    append_row(tmp_path, row("a", False, 0.1))
+    rows = read_index(tmp_path)
+    assert [(r.run_id, r.outcome) for r in rows] == [("a", "timeout"), ("b", "timeout")]
+    assert near_crashes(rows) == []
 
 
 def test_near_crash_ranking_worst_first():
