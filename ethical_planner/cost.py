@@ -123,16 +123,22 @@ def responsibility(risks: np.ndarray, r: np.ndarray, present: np.ndarray | None 
     return bayes(r * risks, present)
 
 
+#: Lanes of the lane grid continued beyond the road's outer lanes (see path_deviation).
+_VIRTUAL_LANES = 3
+
+
 def path_deviation(
     d: np.ndarray, lane_offsets: tuple[float, ...], lane_width: float, reference: PathReference
 ) -> tuple[np.ndarray, np.ndarray]:
     """Lateral deviation of candidates for the mobility term.
 
     With ``LANES`` a candidate is measured at every step against the centre of the lane
-    it is in (the nearest lane centre of the environment), so a candidate that changes
-    lanes pays for the transition, not for the lane it ends in; the second output is
-    the mean number of lanes between that lane and the route's (the lane centre
-    nearest the reference path), for the lane preference. With ``ROUTE`` the reference
+    it is in (the nearest lane centre of the environment; beyond the outer lanes the
+    lane grid continues at ``lane_width``, so a shoulder or a parking strip counts as
+    another lane), so a candidate that changes lanes pays for the transition, not for
+    the lane it ends in; the second output is the mean number of lanes between that
+    lane and the route's (the lane centre nearest the reference path), for the lane
+    preference. With ``ROUTE`` the reference
     is the reference path itself (d = 0; the reference implementation) and no lane is
     counted.
 
@@ -148,11 +154,15 @@ def path_deviation(
     n = d.shape[0]
     if reference is PathReference.ROUTE or not lane_offsets:
         return np.abs(d).mean(axis=1), np.zeros(n)
-    centres = np.sort(np.asarray(lane_offsets, dtype=float))
+    road = np.sort(np.asarray(lane_offsets, dtype=float))
+    route_centre = road[np.abs(road).argmin()]
+    # Beyond the outer lanes (shoulder, parking strip, kerb) the lane grid goes on: being
+    # there counts as being in another lane, not as a small offset from the outer one.
+    beyond = lane_width * np.arange(1, _VIRTUAL_LANES + 1)
+    centres = np.concatenate([road[0] - beyond[::-1], road, road[-1] + beyond])
     # Nearest lane centre of every (candidate, step): between midpoints of sorted centres.
     lane = np.searchsorted(0.5 * (centres[1:] + centres[:-1]), d)
-    route_lane = int(np.abs(centres).argmin())
-    lanes_away = np.abs(centres[lane] - centres[route_lane]) / lane_width
+    lanes_away = np.abs(centres[lane] - route_centre) / lane_width
     return np.abs(d - centres[lane]).mean(axis=1), lanes_away.mean(axis=1)
 
 

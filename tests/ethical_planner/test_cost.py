@@ -196,6 +196,11 @@ def test_mobility_by_hand_lane_centres_and_the_lane_preference():
     deviation, lanes = path_deviation(d, (0.0, 3.5), 3.5, PathReference.ROUTE)
     np.testing.assert_allclose(deviation, [0.5, 3.5, 7.0 / 4])
     np.testing.assert_allclose(lanes, 0.0)
+    # Beyond the road's lanes the grid goes on: a parking strip at d = -3.2 is a lane away
+    # (0.3 m from its centre at -3.5), not 3.2 m from the route's lane.
+    deviation, lanes = path_deviation(np.full((1, 4), -3.2), (0.0, 3.5), 3.5, PathReference.LANES)
+    np.testing.assert_allclose(deviation, [0.3])
+    np.testing.assert_allclose(lanes, [1.0])
     w = CostWeights(speed=2.0, path_distance=1.0, other_lane=10.0, jerk_lon=0.0, jerk_lat=0.0)
     costs = total_cost(
         np.zeros((3, 0)),
