@@ -25,6 +25,7 @@ from ethical_planner.risk import RiskAssessment, assess_risk
 from ethical_planner.road_users import EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser, RoadUserType, Shape
 from ethical_planner.sampling import (
     CandidateKind,
+    CandidateParameters,
     Candidates,
     PreviousPlan,
     emergency_braking,
@@ -84,54 +85,6 @@ class RoadUserAssessment:
     ego_harm: float
     responsibility: float
     ego_responsibility: float
-
-
-@dataclass(frozen=True, slots=True)
-class CandidateParameters:
-    """What the chosen candidate is, in the terms it was sampled in.
-
-    Attributes:
-        kind: family (grid, brake, continuation, emergency).
-        horizon: its horizon T [s] (a braking candidate's stop time; a continuation's
-            remaining horizon).
-        end_speed: [m/s]. end_offset: lateral offset from the reference path [m].
-        deceleration: a braking candidate's deceleration [m/s^2], else 0.
-    """
-
-    kind: CandidateKind
-    horizon: float
-    end_speed: float
-    end_offset: float
-    deceleration: float
-
-    @classmethod
-    def of(cls, candidates: Candidates, index: int) -> CandidateParameters:
-        """The parameters of candidate ``index``."""
-        return cls(
-            CandidateKind(int(candidates.kind[index])),
-            float(candidates.horizon[index]),
-            float(candidates.end_speed[index]),
-            float(candidates.end_offset[index]),
-            float(candidates.deceleration[index]),
-        )
-
-    def describe(self) -> str:
-        """Short text: "brake 8 m/s^2 to offset -0.5 m", "grid T 1.5 s, 12 m/s, offset 3.5 m"."""
-        if self.kind in (CandidateKind.BRAKE, CandidateKind.EMERGENCY) or self.deceleration > 0:
-            what = f"brake at {self.deceleration:g} m/s^2 to a stop at offset {self.end_offset:+.2f} m"
-        else:
-            what = f"T {self.horizon:.2f} s to {self.end_speed:.1f} m/s at offset {self.end_offset:+.2f} m"
-        return f"{self.kind.name.lower()}: {what}"
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-able form."""
-        return {
-            "kind": self.kind.name.lower(),
-            "horizon": self.horizon,
-            "end_speed": self.end_speed,
-            "end_offset": self.end_offset,
-            "deceleration": self.deceleration,
-        }
 
 
 @dataclass(frozen=True, slots=True, eq=False)

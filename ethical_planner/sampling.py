@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Any
 
 import numpy as np
 
@@ -427,6 +428,54 @@ def emergency_braking(
     return _assemble(t, path, [part])
 
 
+@dataclass(frozen=True, slots=True)
+class CandidateParameters:
+    """What the chosen candidate is, in the terms it was sampled in.
+
+    Attributes:
+        kind: family (grid, brake, continuation, emergency).
+        horizon: its horizon T [s] (a braking candidate's stop time; a continuation's
+            remaining horizon).
+        end_speed: [m/s]. end_offset: lateral offset from the reference path [m].
+        deceleration: a braking candidate's deceleration [m/s^2], else 0.
+    """
+
+    kind: CandidateKind
+    horizon: float
+    end_speed: float
+    end_offset: float
+    deceleration: float
+
+    @classmethod
+    def of(cls, candidates: Candidates, index: int) -> CandidateParameters:
+        """The parameters of candidate ``index``."""
+        return cls(
+            CandidateKind(int(candidates.kind[index])),
+            float(candidates.horizon[index]),
+            float(candidates.end_speed[index]),
+            float(candidates.end_offset[index]),
+            float(candidates.deceleration[index]),
+        )
+
+    def describe(self) -> str:
+        """Short text: "brake 8 m/s^2 to offset -0.5 m", "grid T 1.5 s, 12 m/s, offset 3.5 m"."""
+        if self.kind in (CandidateKind.BRAKE, CandidateKind.EMERGENCY) or self.deceleration > 0:
+            what = f"brake at {self.deceleration:g} m/s^2 to a stop at offset {self.end_offset:+.2f} m"
+        else:
+            what = f"T {self.horizon:.2f} s to {self.end_speed:.1f} m/s at offset {self.end_offset:+.2f} m"
+        return f"{self.kind.name.lower()}: {what}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able form."""
+        return {
+            "kind": self.kind.name.lower(),
+            "horizon": self.horizon,
+            "end_speed": self.end_speed,
+            "end_offset": self.end_offset,
+            "deceleration": self.deceleration,
+        }
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class PreviousPlan:
     """The plan chosen in the previous cycle, kept for its continuation.
@@ -434,18 +483,13 @@ class PreviousPlan:
     Attributes:
         t: its time grid [s], shape (n_t,).
         lon, lat: its Frenet motion, shape (4, n_t) each (s and d with three derivatives).
-        end_speed, end_offset, horizon, deceleration: its sampling parameters.
-        kind: its family.
+        parameters: its family and sampling parameters.
     """
 
     t: np.ndarray
     lon: np.ndarray
     lat: np.ndarray
-    end_speed: float
-    end_offset: float
-    horizon: float
-    deceleration: float
-    kind: CandidateKind
+    parameters: CandidateParameters
 
     @classmethod
     def of(cls, candidates: Candidates, index: int) -> PreviousPlan:
@@ -454,11 +498,7 @@ class PreviousPlan:
             candidates.t.copy(),
             candidates.lon[:, index].copy(),
             candidates.lat[:, index].copy(),
-            float(candidates.end_speed[index]),
-            float(candidates.end_offset[index]),
-            float(candidates.horizon[index]),
-            float(candidates.deceleration[index]),
-            CandidateKind(int(candidates.kind[index])),
+            CandidateParameters.of(candidates, index),
         )
 
 
@@ -504,14 +544,15 @@ def continue_plan(
         lat[1:, beyond] = 0.0
     if abs(lat[0, 0] - start.d) > max_deviation or abs(lon[1, 0] - start.s_dot) > max_deviation:
         return None
+    kept = previous.parameters
     return (
         lon[:, None, :],
         lat[:, None, :],
-        np.array([previous.end_speed]),
-        np.array([previous.end_offset]),
-        np.array([max(previous.horizon - tau, 0.0)]),
+        np.array([kept.end_speed]),
+        np.array([kept.end_offset]),
+        np.array([max(kept.horizon - tau, 0.0)]),
         CandidateKind.CONTINUATION,
-        np.array([previous.deceleration]),
+        np.array([kept.deceleration]),
     )
 
 

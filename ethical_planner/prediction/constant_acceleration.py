@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ethical_planner.config import PredictionConfig
+from ethical_planner.geometry import wrap_angle
 from ethical_planner.prediction.base import (
     PREDICTORS,
     Prediction,
@@ -97,7 +98,7 @@ def sustained_course(
         rates[k] = rate
         # The course now: the fitted line carried on to now; from now on it turns at the
         # (capped) kept rate.
-        deviation = np.angle(np.exp(1j * (yaw[k] - (heading_at_end + slope * end))))
+        deviation = float(wrap_angle(yaw[k] - (heading_at_end + slope * end)))
         course[k] = yaw[k] - np.clip(deviation, -_MAX_COURSE_DEVIATION, _MAX_COURSE_DEVIATION)
     return course, rates
 
