@@ -5,7 +5,10 @@ scenarios): ``from_mapping`` builds a record from nested dicts and lists, or app
 them as overrides to an existing record (``base``); it rejects unknown keys by their
 dotted name (``weights.bogus``, ``road_users[2].behaviour.sped``) and puts the dotted
 path of the offending record in front of every error its ``__post_init__`` raises.
-``read_toml`` and ``errors_in`` name the file. ``to_plain`` is the way back.
+``read_toml`` and ``errors_in`` name the file. ``to_plain`` is the way back (to
+JSON): non-finite floats become the strings ``"inf"``, ``"-inf"`` and ``"nan"`` (JSON
+has no such numbers), which ``from_mapping`` reads back as floats where the field is a
+float, so a record survives the round trip exactly (run records rely on it).
 
 Why not a library: cattrs, dacite and pydantic were weighed against this ~150-line
 module. None of them puts the dotted path in front of the ``ValueError`` that a
@@ -32,6 +35,8 @@ from typing import Any, TypeVar
 import numpy as np
 
 T = TypeVar("T")
+#: JSON spelling of the non-finite floats (``to_plain`` writes them, ``from_mapping`` reads them).
+NON_FINITE = {"inf": math.inf, "-inf": -math.inf, "nan": math.nan}
 
 
 def from_mapping(cls: type[T], data: Any, path: str = "", base: T | None = None) -> T:
@@ -114,7 +119,7 @@ def errors_in(path: str | Path) -> Iterator[None]:
 def to_plain(obj: Any) -> Any:
     """JSON-able copy of a record: dataclasses to dicts, enums to values, arrays to lists.
 
-    Non-finite floats become None (JSON has no NaN).
+    Non-finite floats become "inf", "-inf" or "nan" (read back by ``from_mapping``).
     """
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return {f.name: to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
@@ -125,7 +130,7 @@ def to_plain(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return to_plain(obj.item())
     if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
+        return obj if math.isfinite(obj) else str(obj)
     if isinstance(obj, Mapping):
         return {str(k): to_plain(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
@@ -170,15 +175,39 @@ def _convert(tp: Any, value: Any, path: str, current: Any = None) -> Any:
         return from_mapping(tp, value, path, base=current if isinstance(current, tp) else None)
     origin = typing.get_origin(tp)
     if origin is tuple:
-        args = typing.get_args(tp)
-        if not isinstance(value, list | tuple):
-            raise ValueError(f"{path} must be a list, got {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(args[0], v, f"{path}[{i}]") for i, v in enumerate(value))
-        return tuple(value)
+        return _convert_tuple(typing.get_args(tp), value, path)
+    if origin is dict:
+        return _convert_dict(typing.get_args(tp), value, path)
+    return _convert_scalar(tp, value, path)
+
+
+def _convert_tuple(args: tuple[Any, ...], value: Any, path: str) -> tuple[Any, ...]:
+    """``tuple[X, ...]`` converts every item to X, ``tuple[X, Y]`` item by item."""
+    if not isinstance(value, list | tuple):
+        raise ValueError(f"{path} must be a list, got {value!r}")
+    if len(args) == 2 and args[1] is Ellipsis:
+        return tuple(_convert(args[0], v, f"{path}[{i}]") for i, v in enumerate(value))
+    if args and len(args) == len(value):
+        pairs = enumerate(zip(args, value, strict=True))
+        return tuple(_convert(a, v, f"{path}[{i}]") for i, (a, v) in pairs)
+    return tuple(value)
+
+
+def _convert_dict(args: tuple[Any, ...], value: Any, path: str) -> dict[Any, Any]:
+    """``dict[K, V]`` converts every value to V."""
+    if not isinstance(value, Mapping):
+        raise ValueError(f"{path} must be a table of keys, got {value!r}")
+    value_type = args[1] if args else Any
+    return {k: _convert(value_type, v, _join(path, str(k))) for k, v in value.items()}
+
+
+def _convert_scalar(tp: Any, value: Any, path: str) -> Any:
+    """Check integers, booleans and strings; floats also accept integers and ``NON_FINITE`` strings."""
     if tp is int and (isinstance(value, bool) or not isinstance(value, int)):
         raise ValueError(f"{path} must be an integer, got {value!r}")
     if tp is float:
+        if isinstance(value, str) and value in NON_FINITE:
+            return NON_FINITE[value]
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ValueError(f"{path} must be a finite number, got {value!r}")
         return float(value)

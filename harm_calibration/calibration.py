@@ -261,8 +261,8 @@ def row_offset_fractions(rows: Sequence[dict[str, Any]]) -> np.ndarray:
     states are rebuilt with ``geometry.launch_geometry`` (the same call as the sweep,
     with the rows' speeds) and ``impact_offset_fraction`` is evaluated on them with the
     planner's rectangular shapes (ego ``EGO_SHAPE``, partner ``DEFAULT_SHAPES``). Other
-    rows (closed-loop runs) keep their ``offset`` column, which ``rows.row_from_record``
-    computed from the pre-impact states with the same function.
+    rows (closed-loop runs) keep their ``offset`` column, which ``rows.row_from_impact``
+    computed from the pre-impact states with the same function and the run's body shapes.
 
     Args:
         rows: impact rows with the columns of ``rows.COLUMNS``.

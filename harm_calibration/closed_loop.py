@@ -1,49 +1,34 @@
 """Collisions of closed-loop runs (``etp run`` / ``etp demo``) as impact rows.
 
-Every ``summary.json`` below a folder is read; each entry of its ``collisions``
-list (``ImpactRecord.to_dict``) becomes one row, with the same columns as a sweep.
+Every run record below a folder is read (``mujoco_world.storage.run_record``); each
+of its collisions becomes one row, with the same columns as a sweep and the offset
+computed from the shapes of the bodies that collided, as the run simulated them.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-from harm_calibration.rows import Row, row_from_record
+from harm_calibration.rows import Row, row_from_impact
+from mujoco_world.storage.run_record import iter_records
 
 
-def find_summaries(root: Path) -> list[Path]:
-    """Every ``summary.json`` under ``root``, sorted.
+def rows_from_runs(root: Path) -> list[Row]:
+    """Rows of all collisions recorded in the run records under ``root``.
+
+    Files named ``summary.json`` that are not run records (for example an impact
+    sweep's own summary) are skipped.
 
     Raises:
-        ValueError: ``root`` is not a folder.
+        ValueError: ``root`` is not a folder, or a record cannot be read (file named).
     """
     root = Path(root)
     if not root.is_dir():
         raise ValueError(f"--from-runs: {root} is not a folder")
-    return sorted(root.rglob("summary.json"))
-
-
-def rows_from_runs(root: Path) -> list[Row]:
-    """Rows of all collisions recorded in the run summaries under ``root``.
-
-    Summaries without a ``collisions`` list (for example an impact sweep's own
-    ``summary.json``) are skipped.
-
-    Raises:
-        ValueError: a file is not valid JSON or a collision lacks a key (file named).
-    """
-    root = Path(root)
     rows: list[Row] = []
-    for path in find_summaries(root):
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as error:
-            raise ValueError(f"{path}: not valid JSON: {error}") from None
-        collisions = data.get("collisions") if isinstance(data, dict) else None
-        if not isinstance(collisions, list):
-            continue
+    for path, record in iter_records(root):
+        summary = record.summary
         source = str(path.parent.relative_to(root)) if path.parent != root else "."
-        for k, record in enumerate(collisions):
-            rows.append(row_from_record(record, source=f"{source}[{k}]"))
+        for k, impact in enumerate(summary.collisions):
+            rows.append(row_from_impact(impact, source=f"{source}[{k}]", bodies=summary.bodies))
     return rows

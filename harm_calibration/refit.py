@@ -46,7 +46,7 @@ import numpy as np
 from scipy.optimize import linprog
 from scipy.special import expit, log_expit
 
-from ethical_planner.harm import AreaScheme, FunctionalForm, HarmModel, coefficients
+from ethical_planner.harm import AreaScheme, FunctionalForm, HarmCoefficients, HarmModel, coefficients
 
 REQUIRED = ("dv", "mais3")
 #: What the inputs of an impact-table record are (see the module docstring).
@@ -127,44 +127,57 @@ def parse_records(
     missing = [k for k in (*REQUIRED, *(("area",) if needs_area else ())) if k not in header]
     if missing:
         raise ValueError(f"{source}: missing columns {missing} (have {sorted(header)})")
-    allowed = set(c.area)
     dv, y, w, areas = [], [], [], []
     for i, row in enumerate(rows, start=1):
         where = f"{source} row {i}"
         if None in row or any(row.get(k) is None for k in header):
             raise ValueError(f"{where}: has {'more' if None in row else 'fewer'} fields than the header")
-        try:
-            v = float(row["dv"])
-        except (TypeError, ValueError):
-            raise ValueError(f"{where}: dv must be a number [m/s], got {row['dv']!r}") from None
-        if not math.isfinite(v) or v < 0:
-            raise ValueError(f"{where}: dv must be finite and >= 0 [m/s], got {row['dv']!r}")
-        label = (row["mais3"] or "").strip()
-        if label not in ("0", "1", "0.0", "1.0"):
-            raise ValueError(f"{where}: mais3 must be 0 or 1, got {row['mais3']!r}")
-        weight = 1.0
-        if row.get("weight") not in (None, ""):
-            try:
-                weight = float(row["weight"])
-            except ValueError:
-                raise ValueError(f"{where}: weight must be a number, got {row['weight']!r}") from None
-            if not math.isfinite(weight) or weight < 0:
-                raise ValueError(f"{where}: weight must be finite and >= 0, got {row['weight']!r}")
-        key = ""
-        if needs_area:
-            key = _area_key(c.areas, row["area"] or "") or ""
-            if key not in allowed:
-                raise ValueError(
-                    f"{where}: area {row['area']!r} is not an area of model {c.model.value!r}; "
-                    f"allowed: {sorted(allowed)}"
-                )
-        dv.append(v)
-        y.append(float(label))
-        w.append(weight)
-        areas.append(key)
+        dv.append(_row_dv(row, where))
+        y.append(_row_label(row, where))
+        w.append(_row_weight(row, where))
+        areas.append(_row_area(row, where, c) if needs_area else "")
     if not dv:
         raise ValueError(f"{source}: no records")
     return CrashRecords(np.array(dv), np.array(y), tuple(areas), np.array(w), source)
+
+
+def _row_dv(row: dict[str, str], where: str) -> float:
+    try:
+        v = float(row["dv"])
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: dv must be a number [m/s], got {row['dv']!r}") from None
+    if not math.isfinite(v) or v < 0:
+        raise ValueError(f"{where}: dv must be finite and >= 0 [m/s], got {row['dv']!r}")
+    return v
+
+
+def _row_label(row: dict[str, str], where: str) -> float:
+    label = (row["mais3"] or "").strip()
+    if label not in ("0", "1", "0.0", "1.0"):
+        raise ValueError(f"{where}: mais3 must be 0 or 1, got {row['mais3']!r}")
+    return float(label)
+
+
+def _row_weight(row: dict[str, str], where: str) -> float:
+    if row.get("weight") in (None, ""):
+        return 1.0
+    try:
+        weight = float(row["weight"])
+    except ValueError:
+        raise ValueError(f"{where}: weight must be a number, got {row['weight']!r}") from None
+    if not math.isfinite(weight) or weight < 0:
+        raise ValueError(f"{where}: weight must be finite and >= 0, got {row['weight']!r}")
+    return weight
+
+
+def _row_area(row: dict[str, str], where: str, c: HarmCoefficients) -> str:
+    key = _area_key(c.areas, row["area"] or "") or ""
+    if key not in c.area:
+        raise ValueError(
+            f"{where}: area {row['area']!r} is not an area of model {c.model.value!r}; "
+            f"allowed: {sorted(set(c.area))}"
+        )
+    return key
 
 
 def records_from_impacts(
@@ -206,38 +219,43 @@ def records_from_impacts(
             present.add(name or "none (wall)")
             if name != c.model.value:
                 continue
-            try:
-                v = float(row[f"dv_{inputs}_{side}"])
-                h = float(row[f"harm_measured_{side}"])
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"{source} line {i}: dv_{inputs}_{side} and harm_measured_{side} must be numbers"
-                ) from None
-            if not (math.isfinite(v) and math.isfinite(h)):
-                continue
-            if v < 0 or not 0.0 <= h <= 1.0:
-                raise ValueError(
-                    f"{source} line {i}: dv_{inputs}_{side} must be >= 0 and harm_measured_{side} "
-                    f"in [0, 1], got {v} and {h}"
-                )
-            key = ""
-            if c.areas is not AreaScheme.NONE:
-                raw = row[f"{area_column}_{inputs}_{side}"] or ""
-                key = _area_key(c.areas, raw) or ""
-                if key not in c.area:
-                    raise ValueError(
-                        f"{source} line {i}: {area_column}_{inputs}_{side} {raw!r} is not an area of "
-                        f"model {c.model.value!r}"
-                    )
-            dv.append(v)
-            y.append(h)
-            areas.append(key)
+            record = _impact_record(row, side, c, inputs, area_column, f"{source} line {i}")
+            if record is not None:
+                dv.append(record[0])
+                y.append(record[1])
+                areas.append(record[2])
     if not dv:
         raise ValueError(
             f"{source}: no measured body was assessed with model {c.model.value!r}; "
             f"models present: {', '.join(sorted(present)) or 'none'}"
         )
     return CrashRecords(np.array(dv), np.array(y), tuple(areas), np.ones(len(dv)), source)
+
+
+def _impact_record(
+    row: dict[str, str], side: str, c: HarmCoefficients, inputs: str, area_column: str, where: str
+) -> tuple[float, float, str] | None:
+    """(delta-v, measured harm, area key) of one body of an impact row; None if not finite."""
+    try:
+        v = float(row[f"dv_{inputs}_{side}"])
+        h = float(row[f"harm_measured_{side}"])
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: dv_{inputs}_{side} and harm_measured_{side} must be numbers") from None
+    if not (math.isfinite(v) and math.isfinite(h)):
+        return None
+    if v < 0 or not 0.0 <= h <= 1.0:
+        raise ValueError(
+            f"{where}: dv_{inputs}_{side} must be >= 0 and harm_measured_{side} in [0, 1], got {v} and {h}"
+        )
+    if c.areas is AreaScheme.NONE:
+        return v, h, ""
+    raw = row[f"{area_column}_{inputs}_{side}"] or ""
+    key = _area_key(c.areas, raw) or ""
+    if key not in c.area:
+        raise ValueError(
+            f"{where}: {area_column}_{inputs}_{side} {raw!r} is not an area of model {c.model.value!r}"
+        )
+    return v, h, key
 
 
 def _read_csv(path: Path) -> tuple[list[str], list[dict[str, str]]]:

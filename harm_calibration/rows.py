@@ -1,9 +1,9 @@
 """Flat table rows of measured-versus-predicted impacts, and their CSV file.
 
 One row per impact, the same columns for controlled sweeps and for collisions of
-closed-loop runs. Both are built from the JSON shape of
-``mujoco_world.compare.ImpactRecord.to_dict`` (the ``collisions`` entries of a run's
-``summary.json``), so the two sources are compared identically.
+closed-loop runs. Both are built from the typed ``mujoco_world.evaluation.compare.
+ImpactRecord`` (a run's collisions come from its ``RunRecord``, with the run's body
+shapes), so the two sources are compared identically.
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ from typing import Any
 import numpy as np
 
 from ethical_planner.geometry import impact_offset_fraction, velocity_angle
-from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, RoadUserType
 from harm_calibration.geometry import STATIC, classify
+from mujoco_world.evaluation.compare import ImpactRecord
+from mujoco_world.loop.summary import BodyRecord
 
 #: Identification and design columns (sweep design values; derived for runs).
 KEY_COLUMNS = (
@@ -44,82 +45,76 @@ _TEXT = frozenset(
 Row = dict[str, Any]
 
 
-def _num(value: Any) -> float:
-    return math.nan if value is None else float(value)
+def _num(value: float | None) -> float:
+    """A CSV number: None and infinite values (a wall's mass) become nan."""
+    return math.nan if value is None or math.isinf(value) else float(value)
 
 
-def _shape(body: Mapping[str, Any]) -> tuple[float, float]:
-    """(length, width) [m] of a body, as the planner knows it."""
-    shape = EGO_SHAPE if body.get("entity") == 0 else DEFAULT_SHAPES[RoadUserType(body["type"])]
-    return shape.length, shape.width
-
-
-def _is_static(body: Mapping[str, Any]) -> bool:
-    return body.get("entity") == -1 or body.get("mass") is None
-
-
-def row_from_record(
-    record: Mapping[str, Any], *, source: str, design: Mapping[str, Any] | None = None
+def row_from_impact(
+    impact: ImpactRecord,
+    *,
+    source: str,
+    design: Mapping[str, Any] | None = None,
+    bodies: Sequence[BodyRecord] = (),
 ) -> Row:
-    """Flatten one ``ImpactRecord.to_dict()`` into a table row.
+    """Flatten one measured impact and its prediction into a table row.
 
     Args:
-        record: dict with keys ``measurement`` and ``comparison`` as in ``summary.json``.
+        impact: the measured collision with the model's prediction beside it.
         source: where it came from (sweep case id or run folder).
         design: sweep design values (``id``, ``partner``, ``closing_speed`` [m/s],
             ``angle_deg`` [deg], ``offset`` [-], ``restitution_set``); derived from the
             pre-impact states when None.
+        bodies: the run's bodies (``RunSummary.bodies``): their shapes give the
+            offset fraction when ``design`` is None.
 
     Returns:
         A dict with every column of ``COLUMNS``.
 
     Raises:
-        ValueError: a required key is missing; the message names it.
+        ValueError: ``design`` is None and a colliding body is not among ``bodies``.
     """
-    try:
-        meas = record["measurement"]
-        comp = record["comparison"]
-        bodies = {"a": meas["a"], "b": meas["b"]}
-        comps = {"a": comp["a"], "b": comp["b"]}
-    except (KeyError, TypeError) as error:
-        raise ValueError(f"{source}: collision record lacks key {error}") from None
+    meas = impact.measurement
     row: Row = {c: math.nan for c in COLUMNS}
-    for side in ("a", "b"):
-        body, c = bodies[side], comps[side]
-        row[f"type_{side}"] = body.get("type", "")
-        row[f"mass_{side}"] = _num(body.get("mass"))
-        row[f"speed_{side}"] = float(np.hypot(*body["velocity"]))
+    for side, body, c in (("a", meas.a, impact.a), ("b", meas.b, impact.b)):
+        row[f"type_{side}"] = body.type
+        row[f"mass_{side}"] = _num(body.mass)
+        row[f"speed_{side}"] = float(np.hypot(*body.velocity))
         for field in (
             "dv_measured", "dv_com", "dv_predicted", "dv_error", "clock_measured", "clock_predicted",
             "harm_measured", "harm_predicted",
         ):  # fmt: skip
-            row[f"{field}_{side}"] = _num(c.get(field))
-        for field in ("area_measured", "area_predicted"):
-            row[f"{field}_{side}"] = c.get(field) or ""
-        row[f"model_{side}"] = c.get("model") or ""
+            row[f"{field}_{side}"] = _num(getattr(c, field))
+        row[f"area_measured_{side}"] = c.area_measured or ""
+        row[f"area_predicted_{side}"] = c.area_predicted or ""
+        row[f"model_{side}"] = c.model or ""
     for field in ("restitution", "duration", "peak_force", "max_penetration"):
-        row[field] = _num(meas.get(field))
-    row["status"] = "ok" if meas.get("complete", True) else "incomplete"
+        row[field] = _num(getattr(meas, field))
+    row["status"] = "ok" if meas.complete else "incomplete"
+    row["source"] = source
     if design is not None:
         row.update(design)
         row["source"] = source
         return row
-    a, b = bodies["a"], bodies["b"]
-    va, vb = np.asarray(a["velocity"], float), np.asarray(b["velocity"], float)
+    a, b = meas.a, meas.b
+    va, vb = np.asarray(a.velocity, float), np.asarray(b.velocity, float)
     rel_vel = vb - va
-    row["id"] = f"{source}#{meas.get('time', 0.0):.3f}:{a.get('name')}-{b.get('name')}"
-    row["source"] = source
+    row["id"] = f"{source}#{meas.time:.3f}:{a.name}-{b.name}"
     row["closing_speed"] = float(np.hypot(*rel_vel))
     row["restitution_set"] = "run"
-    if _is_static(b):
-        row["partner"] = b.get("type") or STATIC
+    if b.is_static:
+        row["partner"] = b.type or STATIC
         row["class"] = STATIC
         return row
-    row["partner"] = b["type"]
+    row["partner"] = b.type
     # A body at rest has no velocity direction: its heading stands in for it.
-    row["angle_deg"] = math.degrees(float(velocity_angle(va, vb, a["yaw"], b["yaw"])))
+    row["angle_deg"] = math.degrees(float(velocity_angle(va, vb, a.yaw, b.yaw)))
+    shapes = {body.id: (body.length, body.width) for body in bodies}
+    missing = [body.name for body in (a, b) if body.entity not in shapes]
+    if missing:
+        raise ValueError(f"{source}: the run's bodies lack {', '.join(missing)} (no shape for the offset)")
     offset = impact_offset_fraction(
-        a["position"], va, a["yaw"], *_shape(a), b["position"], vb, b["yaw"], *_shape(b)
+        a.position, va, a.yaw, *shapes[a.entity], b.position, vb, b.yaw, *shapes[b.entity]
     )
     row["offset"] = float(offset)
     row["class"] = classify(row["angle_deg"], row["offset"])

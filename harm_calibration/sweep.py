@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUserType
 from harm_calibration.geometry import Footprint, classify, launch_geometry, speeds_for_closing
-from harm_calibration.rows import COLUMNS, Row, read_rows, row_from_record, write_rows
+from harm_calibration.rows import COLUMNS, Row, read_rows, row_from_impact, write_rows
 from mujoco_world.evaluation.compare import compare_impact
 from mujoco_world.physics.impact import ImpactRig
 from mujoco_world.physics.scene import BodyProxy
@@ -195,7 +195,7 @@ def run_case(case: ImpactCase) -> Row:
         row = {c: math.nan for c in COLUMNS} | design
         row.update(source="sweep", status="miss")
         return row
-    return row_from_record(compare_impact(measurement).to_dict(), source="sweep", design=design)
+    return row_from_impact(compare_impact(measurement), source="sweep", design=design)
 
 
 def run_sweep(

@@ -127,3 +127,28 @@ def test_importing_every_module_pulls_in_nothing_above(package):
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.strip() == "", f"{package} imports {out.stdout.strip()}"
+
+
+#: The world's concern groups, bottom to top: each imports only groups before it.
+WORLD_GROUPS = ("scenario", "physics", "agents", "evaluation", "loop", "storage", "experiments")
+
+
+def test_world_groups_cover_every_subpackage():
+    found = {p.name for p in (ROOT / "mujoco_world").iterdir() if (p / "__init__.py").is_file()}
+    assert found - {"data"} == set(WORLD_GROUPS)
+
+
+@pytest.mark.parametrize(
+    ("module", "path"),
+    [(m, p) for m, p in _modules() if m.count(".") >= 2 and m.startswith("mujoco_world.")],
+    ids=[m for m, _ in _modules() if m.count(".") >= 2 and m.startswith("mujoco_world.")],
+)
+def test_world_groups_import_only_groups_below(module, path):
+    rank = {group: k for k, group in enumerate(WORLD_GROUPS)}
+    own = rank[module.split(".")[1]]
+    above = [
+        f"{module}:{line} imports {name}"
+        for line, name in _imports(module, path)
+        if name.startswith("mujoco_world.") and rank.get(name.split(".")[1], -1) > own
+    ]
+    assert above == []

@@ -119,7 +119,9 @@ def add_config(parser: argparse.ArgumentParser) -> None:
 def planner_configs(names: Sequence[str], config: Path | None) -> list:
     """Planner configurations for preset ``names`` with the overrides of ``config`` applied.
 
-    Without ``config`` the presets themselves. With it, each preset gets the file's
+    Without ``config`` the presets themselves, and the other registered planners
+    (``mujoco_world.agents.EGO_PLANNERS``: the scripted manoeuvres) by name. With it,
+    each preset gets the file's
     overrides and is named ``<preset>+<file stem>`` unless the file sets ``name`` (a
     file's ``preset`` key is allowed when one planner is asked for and chooses it).
     A ``risk.delta_v_correction`` path is resolved against the file's folder and
@@ -131,12 +133,18 @@ def planner_configs(names: Sequence[str], config: Path | None) -> list:
     """
     import dataclasses
 
-    from ethical_planner.config import load_config, preset
+    from ethical_planner.config import PRESETS, load_config, preset
     from ethical_planner.dv_correction import DeltaVCorrection
     from ethical_planner.records import read_toml
+    from mujoco_world.agents import EGO_PLANNERS
 
+    for name in names:
+        EGO_PLANNERS.get(name)  # an unknown name lists every planner
     if config is None:
-        return [preset(name) for name in names]
+        return [preset(name) if name in PRESETS else name for name in names]
+    scripted = [name for name in names if name not in PRESETS]
+    if scripted:
+        raise ValueError(f"--config {config} applies to planner presets, not to {', '.join(scripted)}")
     keys = read_toml(config, "planner configuration")
     if "preset" in keys and len(names) > 1:
         raise ValueError(

@@ -8,6 +8,7 @@ run (``RunTask.run_dir``, its name is the run id) with ``summary.json`` and
 from __future__ import annotations
 
 import argparse
+import math
 import time
 
 from ethical_planner.validation import check
@@ -50,7 +51,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="catalog name (see 'etp scenarios'), a generated name such as dense_urban-s3-17, "
         "or a scenario .toml file",
     )
-    p.add_argument("--planner", default="ethical", help="ethical, selfish or standard (default ethical)")
+    p.add_argument(
+        "--planner",
+        default="ethical",
+        help="a planner preset (ethical, selfish, standard, ethical_responsible) or a scripted "
+        "manoeuvre (keep_lane, emergency_brake); default ethical",
+    )
     add_config(p)
     p.add_argument("--seed", type=int, default=0, help="seed of the observation noise, >= 0 (default 0)")
     p.add_argument("--out", default="logs/run", metavar="ROOT", help="output root (default logs/run)")
@@ -74,7 +80,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="logs/demo", metavar="ROOT", help="output root (default logs/demo)")
     p.add_argument("--quick", action="store_true", help="run a small subset of the catalog")
     p.add_argument("--scenarios", default=None, help="comma-separated scenario names or .toml files")
-    p.add_argument("--planners", default="ethical,selfish,standard", help="comma-separated presets")
+    p.add_argument(
+        "--planners",
+        default="ethical,selfish,standard",
+        help="comma-separated planner presets or scripted manoeuvres (keep_lane, emergency_brake)",
+    )
     add_config(p)
     p.add_argument("--seeds", default="0", help="comma-separated run seeds, each >= 0 (default 0)")
     p.add_argument(
@@ -106,7 +116,7 @@ def _predictor_argument(parser: argparse.ArgumentParser) -> None:
 
 def _run_config(args: argparse.Namespace, **fields: object):  # noqa: ANN202 - RunConfig, imported lazily
     from ethical_planner.prediction import PREDICTORS
-    from mujoco_world.loop.runner import RunConfig
+    from mujoco_world.loop.config import RunConfig
 
     if args.predictor is not None:
         PREDICTORS.get(args.predictor)  # raises ValueError listing the registered predictors
@@ -162,7 +172,7 @@ def _progress_observer(label: str, enabled: bool):
     """A ``RunObserver`` that shows a run's simulated time as a progress bar (changes nothing)."""
     from tqdm import tqdm
 
-    from mujoco_world.loop.runner import RunObserver
+    from mujoco_world.loop.observers import RunObserver
 
     class SimulatedTime(RunObserver):
         step_interval = 100  # every 0.1 s of simulated time
@@ -188,11 +198,9 @@ def _progress_observer(label: str, enabled: bool):
 
 
 def _run(args: argparse.Namespace) -> int:
-    from mujoco_world.loop.batch import RunTask, write_json
-    from mujoco_world.loop.runner import ObserverGroup, run_scenario
+    from mujoco_world.experiments.batch import RunTask, run_task
     from mujoco_world.loop.world import ObservationNoise
     from mujoco_world.scenario.sources import resolve_scenario
-    from mujoco_world.storage.run_folder import recording_observer
 
     _non_negative(args.seed, "--seed")
     check(0.0 <= args.noise <= 10.0, f"--noise must lie in [0, 10] m, got {args.noise}")
@@ -200,46 +208,50 @@ def _run(args: argparse.Namespace) -> int:
         0.5 <= args.replan_rate <= 100.0, f"--replan-rate must lie in [0.5, 100] Hz, got {args.replan_rate}"
     )
     (planner,) = planner_configs([args.planner], args.config)
-    scenario = resolve_scenario(args.scenario)
+    scenario = resolve_scenario(args.scenario)  # a bad name or file is bad input, not a failed run
     config = _run_config(args, noise=ObservationNoise(position=args.noise), replan_rate=args.replan_rate)
     root = output_dir(args.out)
-    task = RunTask(args.scenario, planner.name, args.seed, str(root), planner_config=planner)
-    recorder = recording_observer(
-        task.run_dir, keep=args.keep_recordings, record=not args.no_record, out_root=root
+    name, planner_config = (planner, None) if isinstance(planner, str) else (planner.name, planner)
+    task = RunTask(
+        args.scenario, name, args.seed, str(root), not args.no_record, args.keep_recordings, planner_config
     )
-    progress = _progress_observer(f"{scenario.name} [{planner.name}]", show_progress(args))
-    summary = run_scenario(scenario, planner, args.seed, config, ObserverGroup([recorder, progress]))
-    path = task.summary_path
-    data = summary.to_dict()
-    data["recording"] = recorder.row.recording if recorder.row is not None else None
-    write_json(path, data)
+    progress = _progress_observer(f"{scenario.name} [{name}]", show_progress(args))
+    record = run_task(task, config, resume=False, observers=[progress]).record
+    summary = record.summary
     if args.json:
-        print_json(data)
+        print_json(record.to_dict())
         return 1 if summary.outcome == "failed" else 0
-    risk = summary.max_risk
-    print(
-        f"{scenario.name} [{summary.planner}, seed {summary.seed}]: {summary.outcome} after "
-        f"{summary.duration:.2f} s ({summary.reason}); {len(summary.collisions)} collision(s); "
-        f"max risk ego {risk['ego']:.4f}, 3rd party {risk['third_party']:.4f}, "
-        f"VRU {risk['vulnerable']:.4f}; {summary.timings['real_time_factor']:.1f}x real time"
-    )
-    for record in summary.collisions:
-        m = record.measurement
-        print(
-            f"  t={m.time:.2f} s {m.a.name} ({m.a.type}) - {m.b.name} ({m.b.type}): "
-            f"dv measured {record.a.dv_measured:.2f}/{record.b.dv_measured:.2f} m/s, "
-            f"Eq. 1 {record.a.dv_predicted:.2f}/{record.b.dv_predicted:.2f} m/s; "
-            f"areas {m.a.reduced_area}/{m.b.reduced_area}"
-        )
-    print(f"wrote {path}  (run id {task.run_dir.name}, index {root / 'index.jsonl'})")
-    if data["recording"]:
-        print(f"recording: {data['recording']}  (open with: etp replay {task.run_dir.name} --root {root})")
+    _print_run(record)
+    print(f"wrote {task.record_path}  (run id {record.run_id}, index {root / 'index.jsonl'})")
+    if record.recording:
+        print(f"recording: {record.recording}  (open with: etp replay {record.run_id} --root {root})")
     return 1 if summary.outcome == "failed" else 0
 
 
+def _print_run(record) -> None:  # noqa: ANN001 - a RunRecord, imported lazily
+    summary = record.summary
+    risk = summary.max_risk
+    print(
+        f"{summary.scenario} [{summary.planner}, seed {summary.seed}]: {summary.outcome} after "
+        f"{summary.duration:.2f} s ({summary.reason}); {len(summary.collisions)} collision(s); "
+        f"max risk ego {risk.get('ego', math.nan):.4f}, 3rd party {risk.get('third_party', math.nan):.4f}, "
+        f"VRU {risk.get('vulnerable', math.nan):.4f}; "
+        f"{summary.timings.get('real_time_factor', math.nan):.1f}x real time"
+    )
+    for impact in summary.collisions:
+        m = impact.measurement
+        print(
+            f"  t={m.time:.2f} s {m.a.name} ({m.a.type}) - {m.b.name} ({m.b.type}): "
+            f"dv measured {impact.a.dv_measured:.2f}/{impact.b.dv_measured:.2f} m/s, "
+            f"Eq. 1 {impact.a.dv_predicted:.2f}/{impact.b.dv_predicted:.2f} m/s; "
+            f"areas {m.a.reduced_area}/{m.b.reduced_area}"
+        )
+
+
 def _demo(args: argparse.Namespace) -> int:
-    from mujoco_world.loop.batch import (
+    from mujoco_world.experiments.batch import (
         QUICK_SCENARIOS,
+        aggregate_rows,
         comparison_table,
         make_tasks,
         run_batch,
@@ -285,7 +297,7 @@ def _demo(args: argparse.Namespace) -> int:
     root = output_dir(args.out)
     tasks = make_tasks(scenarios, planners, seeds, root, record=not args.no_record, keep=args.keep_recordings)
     start = time.perf_counter()
-    rows = run_batch(
+    results = run_batch(
         tasks,
         workers=args.workers,
         config=_run_config(args) if args.predictor is not None else None,
@@ -293,12 +305,14 @@ def _demo(args: argparse.Namespace) -> int:
         worker_initializer=keep_freed_memory,
     )
     wall = time.perf_counter() - start
-    path = write_aggregate(root, rows, wall)
-    skipped = sum(1 for r in rows if r.get("skipped"))
+    path = write_aggregate(root, results, wall)
+    resumed = sum(1 for r in results if r.resumed)
     if args.json:
-        print_json({"runs": rows, "wall_time": wall, "aggregate": str(path)})
+        print_json({"runs": aggregate_rows(results), "wall_time": wall, "aggregate": str(path)})
     else:
-        print(comparison_table(rows))
-    say(args, f"\n{len(rows)} runs ({skipped} resumed from existing summaries) in {wall:.1f} s; wrote {path}")
+        print(comparison_table(r.record for r in results))
+    say(
+        args, f"\n{len(results)} runs ({resumed} resumed from existing records) in {wall:.1f} s; wrote {path}"
+    )
     say(args, f"run index: {root / 'index.jsonl'}; near-crash runs: etp near-crash {root}")
     return 0

@@ -88,16 +88,8 @@ class ImpactRecord:
         return self.measurement.a.entity == 0
 
     def to_dict(self) -> dict:
-        """JSON-able dict: the measurement and the comparison per body."""
-        return {
-            "time": self.measurement.time,
-            "types": [self.measurement.a.type, self.measurement.b.type],
-            "names": [self.measurement.a.name, self.measurement.b.name],
-            "measurement": self.measurement.to_dict(),
-            "comparison": {"a": to_plain(self.a), "b": to_plain(self.b)},
-            "harm_model": self.harm_model,
-            "pedestrian_model": self.pedestrian_model,
-        }
+        """JSON-able dict of every field (``fields.to_plain``; read back by ``fields.from_mapping``)."""
+        return to_plain(self)
 
 
 def group_of(body: BodyImpact) -> str:

@@ -152,14 +152,8 @@ class ImpactMeasurement:
     ended_in_contact: bool = False
 
     def to_dict(self) -> dict:
-        """JSON-able dict (infinite masses become null)."""
-        out = to_plain(self)
-        for key in ("a", "b"):
-            body = getattr(self, key)
-            out[key]["dv_impulse"] = body.dv_impulse
-            out[key]["dv_com"] = body.dv_com
-            out[key]["speed"] = body.speed
-        return out
+        """JSON-able dict of every field (infinite masses become "inf"; see ``fields.to_plain``)."""
+        return to_plain(self)
 
 
 class _Episode:

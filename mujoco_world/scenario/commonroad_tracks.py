@@ -183,9 +183,39 @@ def _state_array(states: list, name: str) -> np.ndarray | None:
     return np.asarray([_exact(v) for v in values], dtype=float)
 
 
+def _footprint(shape) -> tuple[float, float, bool] | str:  # noqa: ANN001 - a CommonRoad shape
+    """(length, width, circle) [m] of an obstacle's shape, or why it has none."""
+    from commonroad.geometry.shape import Circle, Rectangle
+
+    if isinstance(shape, Rectangle):
+        return float(shape.length), float(shape.width), False
+    if isinstance(shape, Circle):
+        return 2.0 * float(shape.radius), 2.0 * float(shape.radius), True
+    return f"shape {type(shape).__name__} is not a rectangle or circle"
+
+
+def _headings_and_speeds(
+    states: list, times: np.ndarray, positions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | str:
+    """Recorded headings [rad] and speeds [m/s], missing ones derived from the positions; or why not."""
+    headings = _state_array(states, "orientation")
+    speeds = _state_array(states, "velocity")
+    if headings is None or speeds is None:
+        if len(states) < 2:
+            return "a single state"
+        # Derive what is missing from the positions (central differences).
+        vel = np.gradient(positions, times, axis=0)
+        if speeds is None:
+            speeds = np.hypot(vel[:, 0], vel[:, 1])
+        if headings is None:
+            headings = np.arctan2(vel[:, 1], vel[:, 0])
+    if not (np.all(np.isfinite(headings)) and np.all(np.isfinite(speeds))):
+        return "orientation or velocity is not finite"
+    return headings, speeds
+
+
 def _obstacle_track(obstacle, dt_scale: float) -> tuple[Track | None, str]:
     """(track, "") or (None, reason) for one CommonRoad dynamic obstacle."""
-    from commonroad.geometry.shape import Circle, Rectangle
     from commonroad.prediction.prediction import TrajectoryPrediction
 
     kind = COMMONROAD_TYPES.get(obstacle.obstacle_type.value)
@@ -194,14 +224,10 @@ def _obstacle_track(obstacle, dt_scale: float) -> tuple[Track | None, str]:
     if not isinstance(obstacle.prediction, TrajectoryPrediction):
         what = type(obstacle.prediction).__name__ if obstacle.prediction is not None else "no prediction"
         return None, f"no recorded trajectory ({what})"
-    shape = obstacle.obstacle_shape
-    if isinstance(shape, Rectangle):
-        length, width, circle = float(shape.length), float(shape.width), False
-    elif isinstance(shape, Circle):
-        length = width = 2.0 * float(shape.radius)
-        circle = True
-    else:
-        return None, f"shape {type(shape).__name__} is not a rectangle or circle"
+    footprint = _footprint(obstacle.obstacle_shape)
+    if isinstance(footprint, str):
+        return None, footprint
+    length, width, circle = footprint
     states = [obstacle.initial_state, *obstacle.prediction.trajectory.state_list]
     steps = np.array([int(s.time_step) for s in states])
     if len(steps) > 1 and np.any(np.diff(steps) != 1):
@@ -210,20 +236,10 @@ def _obstacle_track(obstacle, dt_scale: float) -> tuple[Track | None, str]:
     positions = np.asarray([_exact(s.position) for s in states], dtype=float)
     if positions.ndim != 2 or positions.shape[1] != 2 or not np.all(np.isfinite(positions)):
         return None, "positions are not finite points"
-    headings = _state_array(states, "orientation")
-    speeds = _state_array(states, "velocity")
-    if headings is None or speeds is None or len(states) < 2:
-        if len(states) < 2:
-            return None, "a single state"
-        # Derive what is missing from the positions (central differences).
-        times = steps * dt_scale
-        vel = np.gradient(positions, times, axis=0)
-        if speeds is None:
-            speeds = np.hypot(vel[:, 0], vel[:, 1])
-        if headings is None:
-            headings = np.arctan2(vel[:, 1], vel[:, 0])
-    if not (np.all(np.isfinite(headings)) and np.all(np.isfinite(speeds))):
-        return None, "orientation or velocity is not finite"
+    motion = _headings_and_speeds(states, steps * dt_scale, positions)
+    if isinstance(motion, str):
+        return None, motion
+    headings, speeds = motion
     if length <= 0 or width <= 0:
         return None, f"non-positive shape {length} x {width} m"
     track = Track(

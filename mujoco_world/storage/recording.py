@@ -41,8 +41,10 @@ import shapely
 from ethical_planner.planner import Decision
 from ethical_planner.road_users import RoadUserType
 from ethical_planner.validation import check
+from mujoco_world.agents.ego_planner import Plan
 from mujoco_world.evaluation.compare import ImpactRecord
-from mujoco_world.loop.runner import RunObserver, RunSummary
+from mujoco_world.loop.observers import RunObserver
+from mujoco_world.loop.summary import RunSummary
 from mujoco_world.loop.world import World
 from mujoco_world.scenario.road import offset_polyline
 from mujoco_world.scenario.spec import Scenario
@@ -253,20 +255,27 @@ class RerunRecorder(RunObserver):
             self._flush()
             self._next_flush = time + self.config.flush_interval
 
-    def on_cycle(self, decision: Decision, time: float) -> None:
-        """Log the plan, the candidates, the prediction, the decision record and the series."""
+    def on_cycle(self, plan: Plan, time: float) -> None:
+        """Log the plan and, if it carries a decision, the candidates, prediction, record and series."""
         rec = self.rec
         if rec is None:
             return
         rec.set_time("sim_time", duration=time)
         rec.set_time("cycle", sequence=self.cycle)
-        traj = decision.trajectory
+        traj = plan.trajectory
         rec.log(
             "world/plan/chosen",
             rr.LineStrips3D(
                 [_to3(np.column_stack([traj.x, traj.y]), 2 * _Z_LINE)], colors=[EGO_COLOR], radii=0.12
             ),
         )
+        if plan.decision is not None:
+            self._log_decision(plan.decision, time)
+        self.cycle += 1
+        rec.disable_timeline("cycle")  # body poses between cycles carry sim_time only
+
+    def _log_decision(self, decision: Decision, time: float) -> None:
+        rec = self._stream()
         self._log_candidates(decision)
         self._log_prediction(decision)
         rec.log("decision", rr.TextLog(decision.summary(), level="INFO" if decision.level == 10 else "WARN"))
@@ -282,8 +291,6 @@ class RerunRecorder(RunObserver):
                 s.add(f"series/cost/{name}", time, c, value)
         s.add("series/planning_ms", time, c, float(sum(decision.timings_ms.values())))
         s.add("series/level", time, c, float(decision.level))
-        self.cycle += 1
-        rec.disable_timeline("cycle")  # body poses between cycles carry sim_time only
 
     def on_impact(self, record: ImpactRecord) -> None:
         """Log the contact point, the force arrow, delta-v and harm (measured and predicted)."""

@@ -1,144 +1,159 @@
-"""Recording and run-index glue for ``etp run``/``etp demo``, and the ``near-crash``/``replay`` commands.
+"""Run folders: one rule for a run's id and folder, and storing a finished run there.
 
-Wiring for a command that runs one scenario into ``out_dir`` (one folder per run,
-whose name is the run id; the index lives in ``out_dir.parent`` unless told)::
+The run id of (scenario, planner, seed) is ``<scenario key>__<planner key>__s<seed>``
+(``run_id``), and its folder is ``<out>/<run id>`` (``run_dir``); every command that
+writes runs (``etp run``, ``etp demo``, batches) uses these two functions. A key is
+the name itself for catalog, generated and registered names (letters, digits and
+``_ . + -``, no ``__``), and ``<file stem>-<10 hex digits>`` for a file (scenario or
+planner configuration), the digits being the start of the SHA-256 of the file's
+resolved absolute path: ``dirA/s.toml`` and ``dirB/s.toml`` get different folders,
+the same file named from another working directory gets the same one (a batch
+resumes it), a moved file gets a new one.
 
-    observer = recording_observer(out_dir, keep="near_crash", record=not args.no_record)
-    summary = run_scenario(scenario, planner, seed, config, observer=observer)
-    row = observer.row  # already appended to <out_root>/index.jsonl
-
-``index_run(summary, out_root, recording_path)`` appends a row by hand when no
-``RecordedRun`` observer was used.
+``store_run`` writes the run's record (``run_record``), keeps or drops its recording
+(``keep``) and appends its row to ``<out>/index.jsonl`` (``run_index``), in that order.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict
+import dataclasses
+import hashlib
+import os
+import re
 from pathlib import Path
 
-from mujoco_world.loop.runner import ObserverGroup, RunSummary
-from mujoco_world.storage.recording import RECORDING_FILE, RecorderConfig, RerunRecorder
-from mujoco_world.storage.run_index import (
-    INDEX_FILE,
-    IndexRow,
-    NearCrashThresholds,
-    SafetyMetrics,
-    append_row,
-    find_run,
-    make_row,
-)
+from mujoco_world.loop.config import RunConfig
+from mujoco_world.loop.summary import RunSummary
+from mujoco_world.storage.recording import RECORDING_FILE
+from mujoco_world.storage.run_index import INDEX_FILE, NearCrashThresholds, append_row, find_run, make_row
+from mujoco_world.storage.run_record import RunRecord, write_record
 
 #: Allowed values of ``keep``.
 KEEP_CHOICES = ("all", "near_crash")
 #: Default output root of ``etp run``.
 DEFAULT_ROOT = Path("logs")
+#: Suffixes of scenario and planner files.
+FILE_SUFFIXES = (".toml", ".xml")
+_NAME = re.compile(r"[A-Za-z0-9_.+-]+")
+_HASH_DIGITS = 10
 
 
-def _parse_keep(keep: str) -> str:
+def parse_keep(keep: str) -> str:
+    """``keep`` as one of ``KEEP_CHOICES`` ("near-crash" is accepted for "near_crash").
+
+    Raises:
+        ValueError: an unknown value.
+    """
     value = keep.replace("-", "_")
     if value not in KEEP_CHOICES:
         raise ValueError(f"keep must be one of {', '.join(KEEP_CHOICES)} (or near-crash), got {keep!r}")
     return value
 
 
-class RecordedRun(ObserverGroup):
-    """Observer of one run: recording (optional), safety metrics, index row at the end.
-
-    Attributes:
-        out_dir: the run's folder; its name is the run id.
-        out_root: folder of ``index.jsonl``.
-        recorder: the Rerun recorder, or None with ``record=False``.
-        metrics: minimum TTC and highest planned collision probability.
-        row: the index row, set by ``on_end``.
-    """
-
-    def __init__(
-        self,
-        out_dir: str | Path,
-        out_root: str | Path | None = None,
-        keep: str = "all",
-        record: bool = True,
-        config: RecorderConfig | None = None,
-        thresholds: NearCrashThresholds | None = None,
-        run_id: str | None = None,
-    ) -> None:
-        self.out_dir = Path(out_dir)
-        self.out_root = Path(out_root) if out_root is not None else self.out_dir.parent
-        self.keep = _parse_keep(keep)
-        self.thresholds = thresholds or NearCrashThresholds()
-        self.run_id = run_id or self.out_dir.resolve().name
-        self.metrics = SafetyMetrics()
-        self.recorder = RerunRecorder(self.out_dir, config, self.run_id) if record else None
-        members = [self.metrics] + ([self.recorder] if self.recorder is not None else [])
-        super().__init__(members)
-        self.row: IndexRow | None = None
-
-    def on_end(self, summary: RunSummary) -> None:
-        """Close the recording, index the run, drop the recording if it is not kept."""
-        super().on_end(summary)
-        path = self.recorder.path if self.recorder is not None else None
-        row = make_row(summary, self.run_id, path, self.metrics, self.thresholds)
-        if path is not None and self.keep == "near_crash" and not row.near_crash:
-            path.unlink(missing_ok=True)
-            row = IndexRow(**{**asdict(row), "recording": None})
-        append_row(self.out_root, row)
-        self.row = row
+def is_file_source(source: str) -> bool:
+    """True if ``source`` names a file (a known suffix or a path separator), not a registered name."""
+    seps = (os.sep, os.altsep or os.sep)
+    return Path(source).suffix.lower() in FILE_SUFFIXES or any(sep in source for sep in seps)
 
 
-def recording_observer(
-    out_dir: str | Path,
-    keep: str = "all",
-    record: bool = True,
-    out_root: str | Path | None = None,
-    config: RecorderConfig | None = None,
-    thresholds: NearCrashThresholds | None = None,
-    run_id: str | None = None,
-) -> RecordedRun:
-    """Observer that records a run to ``out_dir/recording.rrd`` and indexes it.
+def source_key(source: str, what: str = "name") -> str:
+    """The part of a run id that stands for a scenario or planner (see the module docstring).
 
     Args:
-        out_dir: the run's folder (its name is the run id unless ``run_id`` is given).
-        keep: "all" keeps every recording; "near_crash" (or "near-crash") deletes it
-            at the end unless the run is a near crash. The index lists every run.
-        record: False (``--no-record``) writes no recording but still indexes the run.
-        out_root: folder of ``index.jsonl`` (default: ``out_dir``'s parent).
-        config: what the recorder logs.
+        source: a registered name, or a file path.
+        what: what ``source`` is, for the error message ("scenario", "planner").
+
+    Raises:
+        ValueError: a name with characters outside letters, digits and ``_ . + -``, or
+            with ``__`` (the run id's separator).
+    """
+    if is_file_source(source):
+        path = Path(source).expanduser().resolve()
+        digest = hashlib.sha256(str(path).encode("utf-8")).hexdigest()[:_HASH_DIGITS]
+        stem = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9_.+-]", "_", path.stem)).strip("_") or "file"
+        return f"{stem}-{digest}"
+    if not (isinstance(source, str) and _NAME.fullmatch(source) and "__" not in source):
+        raise ValueError(
+            f"{what} {source!r} cannot name a run: use letters, digits and _ . + - (no '__'), or a file path"
+        )
+    return source
+
+
+def run_id(scenario: str, planner: str, seed: int) -> str:
+    """The id of the run of ``scenario`` with ``planner`` and ``seed`` (module docstring).
+
+    Args:
+        scenario: catalog or generated name, or a scenario file.
+        planner: planner name, or a planner configuration file.
+        seed: run seed.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise ValueError(f"seed must be an integer, got {seed!r}")
+    return f"{source_key(scenario, 'scenario')}__{source_key(planner, 'planner')}__s{seed}"
+
+
+def run_dir(out: str | Path, run: str) -> Path:
+    """Folder of the run with id ``run`` under the output root ``out``."""
+    return Path(out) / run
+
+
+def source_of(source: str) -> str:
+    """What a record keeps as the source: the resolved path of a file, else the name."""
+    return str(Path(source).expanduser().resolve()) if is_file_source(source) else source
+
+
+def store_run(
+    summary: RunSummary,
+    out: str | Path,
+    run: str,
+    *,
+    scenario_source: str = "",
+    planner_source: str = "",
+    config: RunConfig | None = None,
+    recording: str | Path | None = None,
+    keep: str = "all",
+    thresholds: NearCrashThresholds | None = None,
+    write: bool = True,
+) -> RunRecord:
+    """Store a finished run: its record in ``run_dir(out, run)``, its row in ``out``'s index.
+
+    Args:
+        summary: what the loop produced.
+        out: output root (holds ``index.jsonl`` and the run folders).
+        run: the run id (``run_id``).
+        scenario_source, planner_source: what was asked for (kept in the record).
+        config: the loop settings of the run.
+        recording: the run's ``.rrd`` file, if one was written.
+        keep: "all" keeps every recording; "near_crash" deletes it unless the run is
+            a near crash (the index lists every run).
         thresholds: near-crash thresholds.
-        run_id: id in the index and of the Rerun recording.
+        write: False indexes the run without writing its record (an interrupted run:
+            a rerun of the batch runs it again).
+
+    Returns:
+        The record as written (``recording`` None if it was dropped).
 
     Raises:
         ValueError: an unknown ``keep``.
     """
-    return RecordedRun(out_dir, out_root, keep, record, config, thresholds, run_id)
-
-
-def index_run(
-    summary: RunSummary,
-    out_root: str | Path,
-    recording_path: str | Path | None = None,
-    run_id: str | None = None,
-    metrics: SafetyMetrics | None = None,
-    thresholds: NearCrashThresholds | None = None,
-) -> IndexRow:
-    """Append one row for a finished run to ``out_root/index.jsonl`` and return it.
-
-    Args:
-        summary: the run's summary.
-        out_root: folder of the index.
-        recording_path: the run's ``.rrd`` (its folder names the run), or None.
-        run_id: id of the run (default: the recording's folder name, else
-            ``scenario-planner-sSEED``).
-        metrics: TTC and collision probability collected during the run (else unknown).
-        thresholds: near-crash thresholds.
-    """
-    if run_id is None:
-        if recording_path is not None:
-            run_id = Path(recording_path).resolve().parent.name
-        else:
-            run_id = f"{summary.scenario}-{summary.planner}-s{summary.seed}"
-    row = make_row(summary, run_id, recording_path, metrics, thresholds)
-    append_row(out_root, row)
-    return row
+    keep = parse_keep(keep)
+    record = RunRecord(
+        run_id=run,
+        summary=summary,
+        scenario_source=scenario_source,
+        planner_source=planner_source,
+        config=config,
+        recording=None if recording is None else str(recording),
+    )
+    row = make_row(record, thresholds)
+    if recording is not None and keep == "near_crash" and not row.near_crash:
+        Path(recording).unlink(missing_ok=True)
+        record = dataclasses.replace(record, recording=None)
+        row = dataclasses.replace(row, recording=None)
+    if write:
+        write_record(run_dir(out, run), record)
+    append_row(out, row)
+    return record
 
 
 def resolve_recording(run: str, root: str | Path = DEFAULT_ROOT) -> Path:

@@ -4,22 +4,22 @@ Every run appends one ``IndexRow`` to ``<out_root>/index.jsonl`` (append, flush 
 fsync per row, so an interrupted batch keeps every finished run; ``read_index``
 skips a truncated or corrupt line).
 
-Safety metrics of a row:
+A row is made from the run's ``RunRecord`` (``make_row``), so the index can always be
+rebuilt from the records. Its safety metrics are the run's (``mujoco_world.loop.
+metrics``):
 
-* ``min_distance``: the runner's smallest ego-to-road-user geom distance [m]
-  (``RunSummary.min_distance``, MuJoCo ``mj_geomDistance`` every
-  ``RunConfig.distance_interval`` steps until the ego's first contact).
-* ``min_ttc``: smallest time-to-collision [s] from the true states, computed by
-  ``SafetyMetrics`` (a ``RunObserver``) every ``step_interval`` physics steps until the
-  ego's first contact: each body keeps its current velocity and heading (constant
-  velocity), footprints are oriented rectangles (pedestrians: squares of their
-  diameter), and the TTC is the first time in [0, ``horizon``] at which the ego's
-  rectangle and a road user's overlap, solved exactly with the separating-axis test
-  (four axes, each gives an interval of times; their intersection is the overlap).
-  No approach within the horizon gives inf (written as the string "inf").
+* ``min_distance``: smallest ego-to-road-user geom distance [m] (MuJoCo
+  ``mj_geomDistance`` every ``RunConfig.distance_interval`` steps until the ego's
+  first contact).
+* ``min_ttc``: smallest time-to-collision [s] from the true states at 20 Hz until the
+  ego's first contact: each body keeps its current velocity and heading, footprints
+  are oriented rectangles (pedestrians: squares of their diameter), and the TTC is
+  the first time in [0, 10 s] at which the ego's rectangle and a road user's overlap
+  (``evaluation.safety.time_to_collision``). No approach within the horizon gives inf
+  (written as the string "inf").
 * ``max_collision_probability``: the highest ``collision_probability`` of any road
-  user along the chosen plans (``Decision.road_users``), from ``SafetyMetrics``.
-* ``max_risk``: the runner's highest risk per group (ego, third_party, vulnerable).
+  user along the chosen plans (``Decision.road_users``).
+* ``max_risk``: highest risk per group (ego, third_party, vulnerable).
 
 Near crash: a collision, or ``min_distance < thresholds.min_distance``, or
 ``min_ttc < thresholds.min_ttc``, or ``max_collision_probability >=
@@ -43,13 +43,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ethical_planner.planner import Decision
 from ethical_planner.validation import check, check_positive
-from mujoco_world.loop.runner import GROUPS, RunObserver, RunSummary
-from mujoco_world.loop.world import World
-from mujoco_world.scenario.spec import Scenario
+from mujoco_world.loop.summary import GROUPS
+from mujoco_world.storage.run_record import RunRecord
 
 #: File name of the index inside an output root.
 INDEX_FILE = "index.jsonl"
@@ -194,104 +190,6 @@ def _decode(value: Any) -> Any:
     return value
 
 
-def time_to_collision(
-    ego: np.ndarray,
-    others: np.ndarray,
-    horizon: float = 10.0,
-) -> np.ndarray:
-    """Constant-velocity time to first overlap of oriented rectangles (separating axes).
-
-    Args:
-        ego: (x [m], y [m], yaw [rad], vx [m/s], vy [m/s], length [m], width [m]), shape (7,).
-        others: the same per road user, shape (k, 7).
-        horizon: longest time looked ahead [s].
-
-    Returns:
-        (k,) first time of overlap in [0, horizon] [s]; 0 if overlapping now; inf if none.
-    """
-    others = np.atleast_2d(np.asarray(others, dtype=float))
-    ego = np.asarray(ego, dtype=float)
-    k = len(others)
-    if k == 0:
-        return np.zeros(0)
-    d0 = others[:, :2] - ego[:2]  # (k, 2)
-    dv = others[:, 3:5] - ego[3:5]
-
-    def frame(yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        u = np.stack([np.cos(yaw), np.sin(yaw)], axis=-1)
-        return u, np.stack([-u[..., 1], u[..., 0]], axis=-1)
-
-    ue, ne = frame(np.full(k, ego[2]))
-    uk, nk = frame(others[:, 2])
-    lo = np.zeros(k)
-    hi = np.full(k, float(horizon))
-    for axis in (ue, ne, uk, nk):
-        reach = (
-            0.5 * ego[5] * np.abs((ue * axis).sum(1))
-            + 0.5 * ego[6] * np.abs((ne * axis).sum(1))
-            + 0.5 * others[:, 5] * np.abs((uk * axis).sum(1))
-            + 0.5 * others[:, 6] * np.abs((nk * axis).sum(1))
-        )
-        p = (d0 * axis).sum(1)
-        q = (dv * axis).sum(1)
-        moving = np.abs(q) > 1e-12
-        safe_q = np.where(moving, q, 1.0)
-        t1 = (-reach - p) / safe_q
-        t2 = (reach - p) / safe_q
-        inside = np.abs(p) <= reach
-        a_lo = np.where(moving, np.minimum(t1, t2), np.where(inside, -np.inf, np.inf))
-        a_hi = np.where(moving, np.maximum(t1, t2), np.where(inside, np.inf, -np.inf))
-        lo = np.maximum(lo, a_lo)
-        hi = np.minimum(hi, a_hi)
-    return np.where(lo <= hi, lo, np.inf)
-
-
-class SafetyMetrics(RunObserver):
-    """Collects the minimum TTC and the highest planned collision probability of a run.
-
-    Args:
-        horizon: TTC look-ahead [s].
-        rate: TTC evaluations per simulated second [Hz].
-
-    Attributes:
-        min_ttc: smallest TTC so far [s] (inf if none).
-        max_collision_probability: highest planned collision probability so far.
-    """
-
-    def __init__(self, horizon: float = 10.0, rate: float = 20.0) -> None:
-        check_positive("SafetyMetrics", horizon=horizon, rate=rate)
-        self.horizon = float(horizon)
-        self.rate = float(rate)
-        self.step_interval = 50
-        self.min_ttc = math.inf
-        self.max_collision_probability = 0.0
-        self._extent: np.ndarray | None = None
-
-    def on_start(self, world: World, scenario: Scenario, planner: str, seed: int) -> None:
-        """Look up the footprints once."""
-        self.step_interval = max(int(round(1.0 / (self.rate * world.scene.dt))), 1)
-        bodies = world.scene.bodies
-        length = np.array([2 * b.radius if b.is_round else b.length for b in bodies])
-        width = np.array([2 * b.radius if b.is_round else b.width for b in bodies])
-        self._extent = np.column_stack([length, width])
-        self.on_step(world, world.time)
-
-    def on_step(self, world: World, time: float) -> None:
-        """Update the minimum TTC from the true states (until the ego's first contact)."""
-        if self._extent is None or world.n < 2 or world.crashed[0]:
-            return
-        qpos, qvel = world.scene.qpos, world.scene.qvel
-        states = np.column_stack([qpos[:, :2], qpos[:, 2], qvel[:, :2], self._extent])
-        ttc = time_to_collision(states[0], states[1:], self.horizon)
-        self.min_ttc = min(self.min_ttc, float(ttc.min()))
-
-    def on_cycle(self, decision: Decision, time: float) -> None:
-        """Track the highest planned collision probability."""
-        for u in decision.road_users:
-            if u.collision_probability > self.max_collision_probability:
-                self.max_collision_probability = float(u.collision_probability)
-
-
 def severity(
     row_collisions: int,
     max_harm: float,
@@ -333,24 +231,17 @@ def severity(
     return bool(near), max(s_d, s_t, s_p)
 
 
-def make_row(
-    summary: RunSummary,
-    run_id: str,
-    recording_path: str | Path | None = None,
-    metrics: SafetyMetrics | None = None,
-    thresholds: NearCrashThresholds | None = None,
-) -> IndexRow:
-    """Index row of a finished run.
+def make_row(record: RunRecord, thresholds: NearCrashThresholds | None = None) -> IndexRow:
+    """Index row of a stored run.
 
     Args:
-        summary: the runner's summary.
-        run_id: unique id of the run.
-        recording_path: its ``.rrd`` file, if kept.
-        metrics: TTC and collision probability collected during the run; without it
-            those fields are nan (unknown) and do not make a near crash.
+        record: the run's record (its summary's ``min_ttc`` and
+            ``max_collision_probability`` are nan when unknown and then make no
+            near crash).
         thresholds: near-crash thresholds.
     """
     thresholds = thresholds or NearCrashThresholds()
+    summary = record.summary
 
     def max_of(values: Iterable[float]) -> float:
         finite = [v for v in values if math.isfinite(v)]
@@ -358,13 +249,16 @@ def make_row(
 
     harm_m = max_of(b.harm_measured for c in summary.collisions for b in (c.a, c.b))
     harm_p = max_of(b.harm_predicted for c in summary.collisions for b in (c.a, c.b))
-    min_ttc = metrics.min_ttc if metrics is not None else math.nan
-    p_max = metrics.max_collision_probability if metrics is not None else math.nan
     near, score = severity(
-        len(summary.collisions), max(harm_m, harm_p), summary.min_distance, min_ttc, p_max, thresholds
+        len(summary.collisions),
+        max(harm_m, harm_p),
+        summary.min_distance,
+        summary.min_ttc,
+        summary.max_collision_probability,
+        thresholds,
     )
     return IndexRow(
-        run_id=run_id,
+        run_id=record.run_id,
         scenario=summary.scenario,
         planner=summary.planner,
         seed=int(summary.seed),
@@ -373,12 +267,12 @@ def make_row(
         max_harm_measured=harm_m,
         max_harm_predicted=harm_p,
         min_distance=float(summary.min_distance),
-        min_ttc=float(min_ttc),
-        max_collision_probability=float(p_max),
+        min_ttc=float(summary.min_ttc),
+        max_collision_probability=float(summary.max_collision_probability),
         max_risk={g: float(summary.max_risk.get(g, 0.0)) for g in GROUPS},
         near_crash=near,
         severity=float(score),
-        recording=None if recording_path is None else str(recording_path),
+        recording=record.recording,
         duration=float(summary.duration),
     )
 

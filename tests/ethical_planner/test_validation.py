@@ -140,6 +140,31 @@ def test_toml_errors_name_the_file(tmp_path):
         read_toml(path, "example")
 
 
+def test_non_finite_floats_and_tables_survive_the_round_trip():
+    @dataclass(frozen=True)
+    class Record:
+        low: float
+        high: float
+        missing: float
+        per_group: dict[str, float]
+        pair: tuple[float, float]
+
+    record = Record(-math.inf, math.inf, math.nan, {"ego": math.inf, "vru": 1}, (math.nan, 2))
+    plain = to_plain(record)
+    assert plain == {
+        "low": "-inf",
+        "high": "inf",
+        "missing": "nan",
+        "per_group": {"ego": "inf", "vru": 1},
+        "pair": ["nan", 2],
+    }
+    back = from_mapping(Record, plain)
+    assert (back.low, back.high, back.per_group["ego"]) == (-math.inf, math.inf, math.inf)
+    assert math.isnan(back.missing) and math.isnan(back.pair[0])
+    assert back.per_group["vru"] == 1.0 and isinstance(back.per_group["vru"], float)
+    assert back.pair[1] == 2.0 and isinstance(back.pair[1], float)
+
+
 def test_to_plain_is_json_ready():
     @dataclass
     class Plain:
@@ -150,7 +175,7 @@ def test_to_plain_is_json_ready():
 
     plain = to_plain(Plain(math.inf, Colour.GREEN, (np.float64(2.0), Inner()), np.array([[1, 2]])))
     assert plain == {
-        "speed": None,
+        "speed": "inf",
         "colour": "green",
         "values": [2.0, {"speed": 1.0, "colour": "red"}],
         "array": [[1, 2]],

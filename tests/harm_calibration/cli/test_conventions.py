@@ -11,6 +11,7 @@ import pytest
 
 from ethical_planner.dv_correction import DeltaVCorrection
 from harm_calibration.cli import build_parser, main
+from mujoco_world.storage.run_folder import run_id
 from mujoco_world.storage.run_index import read_index
 from tests.harm_calibration.cli.conftest import FOLLOW, write_scenario
 
@@ -63,15 +64,16 @@ def test_json_is_machine_readable_on_every_cheap_command(tmp_path, capsys, short
     batch = _json_out(capsys, [*demo, "--no-record", "--workers", "1", "--json"])
     assert [r["scenario"] for r in batch["runs"]] == ["short"]
     rows = _json_out(capsys, ["near-crash", str(tmp_path / "r"), "--json"])
-    assert [r["run_id"] for r in rows] == ["short__ethical__s0"]  # the head-on crash nearby
+    assert [r["run_id"] for r in rows] == [run_id(short_scenario, "ethical", 0)]  # the head-on crash nearby
 
 
 def test_output_stays_inside_out(tmp_path, short_scenario):
     out = tmp_path / "nest" / "D"
     assert main(["run", short_scenario, "--out", str(out), "--no-record"]) == 0
     assert sorted(p.name for p in (tmp_path / "nest").iterdir()) == ["D"]
-    assert sorted(p.name for p in out.iterdir()) == ["index.jsonl", "short__ethical__s0"]
-    assert [r.run_id for r in read_index(out)] == ["short__ethical__s0"]
+    run = run_id(short_scenario, "ethical", 0)  # short-<hash of the file's path>__ethical__s0
+    assert sorted(p.name for p in out.iterdir()) == ["index.jsonl", run]
+    assert [r.run_id for r in read_index(out)] == [run]
 
 
 def _never(*args, **kwargs):
@@ -80,10 +82,9 @@ def _never(*args, **kwargs):
 
 @pytest.mark.parametrize("command", ["run", "demo"])
 def test_unusable_out_fails_before_simulating(tmp_path, capsys, monkeypatch, short_scenario, command):
-    import mujoco_world.loop.batch as batch
-    import mujoco_world.loop.runner as runner
+    import mujoco_world.experiments.batch as batch
 
-    monkeypatch.setattr(runner, "run_scenario", _never)
+    monkeypatch.setattr(batch, "run_scenario", _never)
     monkeypatch.setattr(batch, "run_batch", _never)
     a_file = tmp_path / "a_file"
     a_file.write_text("x")
@@ -140,7 +141,7 @@ def test_config_overrides_apply_to_run_and_demo(tmp_path, capsys):
         capsys, [*demo, "--out", str(tmp_path / "d"), "--no-record", "--workers", "1", "--json"]
     )
     assert sorted(r["planner"] for r in batch["runs"]) == ["ethical+calibrated", "standard+calibrated"]
-    assert (tmp_path / "d" / "follow__ethical+calibrated__s0" / "summary.json").is_file()
+    assert (tmp_path / "d" / run_id(scenario, "ethical+calibrated", 0) / "summary.json").is_file()
 
 
 @pytest.mark.parametrize(
@@ -154,7 +155,7 @@ def test_config_overrides_apply_to_run_and_demo(tmp_path, capsys):
     ],
 )
 def test_bad_config_is_exit_2_naming_the_file(tmp_path, capsys, monkeypatch, short_scenario, text, message):
-    import mujoco_world.loop.batch as batch
+    import mujoco_world.experiments.batch as batch
 
     monkeypatch.setattr(batch, "run_batch", _never)
     config = tmp_path / "bad.toml"
@@ -185,12 +186,13 @@ def test_near_crash_prints_whole_run_ids_that_replay_accepts(tmp_path, capsys, m
     assert main(["near-crash", str(tmp_path / "out")]) == 0
     text = capsys.readouterr().out
     assert "harm meas / harm pred: highest MAIS3+ probability of any body" in text
-    run_id = f"{long_name}__standard__s0"
-    (line,) = [line for line in text.splitlines() if run_id in line]
-    assert line.split()[1] == run_id
-    assert main(["replay", run_id, "--root", str(tmp_path / "out"), "--json"]) == 0
+    run = run_id(scenario, "standard", 0)
+    assert run.startswith(long_name)
+    (line,) = [line for line in text.splitlines() if run in line]
+    assert line.split()[1] == run
+    assert main(["replay", run, "--root", str(tmp_path / "out"), "--json"]) == 0
     replay = json.loads(capsys.readouterr().out)
-    assert replay["recording"].endswith(f"{run_id}/recording.rrd") and replay["opened"] is False
+    assert replay["recording"].endswith(f"{run}/recording.rrd") and replay["opened"] is False
 
 
 @pytest.mark.parametrize(

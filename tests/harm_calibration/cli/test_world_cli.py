@@ -3,9 +3,12 @@
 import json
 
 from harm_calibration.cli import main
-from mujoco_world.loop.batch import RunTask, comparison_table, run_batch
+from mujoco_world.experiments.batch import RunTask, comparison_table, run_batch
 from mujoco_world.loop.runner import run_scenario
 from mujoco_world.scenario.catalog import catalog_names, get_scenario
+from mujoco_world.storage.run_folder import run_id
+from mujoco_world.storage.run_index import read_index
+from mujoco_world.storage.run_record import read_record
 from tests.harm_calibration.cli.conftest import write_scenario
 
 
@@ -21,17 +24,19 @@ def test_run_writes_a_summary(tmp_path, capsys):
     out = tmp_path / "run"
     code = main(["run", scenario, "--planner", "standard", "--seed", "4", "--out", str(out)])
     assert code == 0
-    summary = json.loads((out / "short__standard__s4" / "summary.json").read_text())
+    run = run_id(scenario, "standard", 4)
+    assert run.startswith("short-") and run.endswith("__standard__s4")  # a file: stem and path hash
+    assert sorted(p.name for p in out.iterdir()) == ["index.jsonl", run]
+    summary = json.loads((out / run / "summary.json").read_text())
+    assert summary["format"] == "etp-run-record" and summary["run_id"] == run
     assert summary["scenario"] == "short"
     assert summary["planner"] == "standard" and summary["seed"] == 4
     assert summary["outcome"] == "crash" and not summary["ego_collided"]
     for key in ("duration", "collisions", "max_risk", "min_distance", "timings", "tracking_rms"):
         assert key in summary
     collision = summary["collisions"][0]
-    assert {"measurement", "comparison"} <= set(collision)
-    assert {"dv_measured", "dv_predicted", "harm_measured", "harm_predicted"} <= set(
-        collision["comparison"]["a"]
-    )
+    assert {"measurement", "a", "b"} <= set(collision)  # the measurement, the prediction per body
+    assert {"dv_measured", "dv_predicted", "harm_measured", "harm_predicted"} <= set(collision["a"])
     assert "wrote" in capsys.readouterr().out
 
 
@@ -39,7 +44,9 @@ def test_run_rejects_bad_input(capsys):
     assert main(["run", "no_such_scenario"]) == 2
     assert "unknown scenario 'no_such_scenario'" in capsys.readouterr().err
     assert main(["run", "oncoming_drift", "--planner", "reckless"]) == 2
-    assert "unknown planner preset 'reckless'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "unknown planner 'reckless'; allowed: ethical, selfish, standard" in err
+    assert "keep_lane" in err
     assert main(["demo", "--scenarios", "nope"]) == 2
 
 
@@ -69,11 +76,10 @@ def test_demo_runs_on_two_workers_and_resumes(tmp_path, capsys):
     assert main(args) == 0
     assert "2 resumed" in capsys.readouterr().out
     # A run in a spawned worker equals the same run in this process.
-    written = json.loads((out / "oncoming_drift__standard__s0" / "summary.json").read_text())
-    written.pop("timings")
-    assert written.pop("recording").endswith("oncoming_drift__standard__s0/recording.rrd")
-    here = run_scenario(get_scenario("oncoming_drift"), "standard", seed=0).comparable_dict()
-    assert json.loads(json.dumps(here)) == written
+    written = read_record(out / "oncoming_drift__standard__s0")
+    assert written.recording.endswith("oncoming_drift__standard__s0/recording.rrd")
+    here = run_scenario(get_scenario("oncoming_drift"), "standard", seed=0)
+    assert written.summary.comparable_dict() == here.comparable_dict()
 
 
 def test_demo_runs_random_variants(tmp_path, capsys):
@@ -104,9 +110,10 @@ def test_a_failing_run_is_recorded_and_the_batch_goes_on(tmp_path):
         RunTask(str(tmp_path / "missing.toml"), "ethical", 0, str(tmp_path)),
         RunTask("red_light_runner", "standard", 0, str(tmp_path)),
     ]
-    rows = run_batch(tasks, workers=1, progress=False)
-    assert rows[0]["outcome"] == "failed" and "cannot read scenario file" in rows[0]["reason"]
-    assert rows[1]["outcome"] in ("goal", "timeout", "crash")
-    failed = json.loads(tasks[0].summary_path.read_text())
-    assert failed["outcome"] == "failed"
-    assert "failed 1" in comparison_table(rows)
+    results = run_batch(tasks, workers=1, progress=False)
+    first, second = (r.record.summary for r in results)
+    assert first.outcome == "failed" and "cannot read scenario file" in first.reason
+    assert second.outcome in ("goal", "timeout", "crash")
+    assert read_record(tasks[0].record_path).summary.outcome == "failed"
+    assert "failed 1" in comparison_table(r.record for r in results)
+    assert [r.run_id for r in read_index(tmp_path)] == [tasks[0].run_id, tasks[1].run_id]

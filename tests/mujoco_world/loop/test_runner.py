@@ -6,8 +6,9 @@ import json
 import numpy as np
 import pytest
 
-import mujoco_world.loop.runner as runner_module
-from mujoco_world.loop.runner import OUTCOMES, RunConfig, RunObserver, run_scenario
+from ethical_planner.planner import Planner
+from mujoco_world.loop.runner import RunConfig, RunObserver, run_scenario
+from mujoco_world.loop.summary import OUTCOMES
 from mujoco_world.loop.world import ObservationNoise
 from mujoco_world.scenario.catalog import catalog_names, generate_scenarios, get_scenario
 from mujoco_world.scenario.spec import scenario_from_dict
@@ -104,7 +105,7 @@ def test_third_party_crash_is_measured_and_ends_the_run():
 
 
 def test_planner_exception_fails_the_run_and_keeps_the_measurements(monkeypatch):
-    original = runner_module.Planner.plan
+    original = Planner.plan
     calls = {"n": 0}
 
     def flaky(self, ego_state, road_users, prediction=None):
@@ -113,7 +114,7 @@ def test_planner_exception_fails_the_run_and_keeps_the_measurements(monkeypatch)
             raise RuntimeError("planner exploded")
         return original(self, ego_state, road_users, prediction)
 
-    monkeypatch.setattr(runner_module.Planner, "plan", flaky)
+    monkeypatch.setattr(Planner, "plan", flaky)
     summary = run_scenario(third_party_crash(duration=10.0), "standard", seed=0)
     assert summary.outcome == "failed"
     assert "planner raised RuntimeError" in summary.reason and "planner exploded" in summary.reason
@@ -155,9 +156,9 @@ def test_observer_sees_cycles_steps_impacts_and_the_end():
             self.started += 1
             assert planner == "standard" and seed == 3
 
-        def on_cycle(self, decision, time):
+        def on_cycle(self, plan, time):
             self.cycles += 1
-            assert decision.trajectory.t[0] == 0.0
+            assert plan.trajectory.t[0] == 0.0 and plan.decision.planner == "standard"
 
         def on_step(self, world, time):
             self.steps += 1
@@ -189,7 +190,7 @@ def test_run_config_is_validated():
         RunConfig(replan_rate=0.0)
     with pytest.raises(ValueError, match="noise.position must be >= 0"):
         ObservationNoise(position=-1.0)
-    with pytest.raises(ValueError, match="unknown planner preset"):
+    with pytest.raises(ValueError, match="unknown planner 'reckless'; allowed: ethical, selfish"):
         run_scenario(get_scenario("red_light_runner"), "reckless")
 
 

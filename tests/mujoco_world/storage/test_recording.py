@@ -175,21 +175,36 @@ class Interrupt(RunObserver):
         self.at_cycle = at_cycle
         self.cycles = 0
 
-    def on_cycle(self, decision, time):
+    def on_cycle(self, plan, time):
         self.cycles += 1
         if self.cycles == self.at_cycle:
             raise KeyboardInterrupt
 
 
-def test_interrupted_run_leaves_a_recording_and_a_failed_index_row(tmp_path):
-    from mujoco_world.storage.run_folder import recording_observer
+def test_interrupted_run_leaves_a_recording_and_a_failed_index_row(tmp_path, monkeypatch):
+    from mujoco_world.experiments import batch
+    from mujoco_world.experiments.batch import RunTask, run_task
+    from mujoco_world.loop.runner import RunInterrupted
     from mujoco_world.storage.run_index import read_index
 
     scenario = dataclasses.replace(get_scenario("tailgater_sudden_stop"), duration=4.0)
-    recorded = recording_observer(tmp_path / "cut-run", out_root=tmp_path)
-    with pytest.raises(KeyboardInterrupt):
-        run_scenario(scenario, "ethical", 0, observer=ObserverGroup([recorded, Interrupt(5)]))
+    monkeypatch.setattr(batch, "resolve_scenario", lambda name: scenario)
+    task = RunTask("tailgater_sudden_stop", "ethical", 0, str(tmp_path))
+    with pytest.raises(RunInterrupted) as stop:
+        run_task(task, observers=[Interrupt(5)])
+    assert isinstance(stop.value, KeyboardInterrupt) and stop.value.summary.outcome == "failed"
     (row,) = read_index(tmp_path)
-    assert row.outcome == "failed" and row.run_id == "cut-run"
+    assert row.outcome == "failed" and row.run_id == "tailgater_sudden_stop__ethical__s0"
+    assert not task.record_path.exists()  # no record: rerunning the batch runs it again
     times, _ = column(read_chunks(row.recording)["/world/ego"], "Boxes3D:centers")
     assert 0.3 <= times.max() < 1.0  # what happened up to the interrupt, no more
+
+
+def test_a_planner_without_decisions_is_recorded_with_its_plans(tmp_path):
+    scenario = dataclasses.replace(get_scenario("tailgater_sudden_stop"), duration=1.0)
+    recorder = RerunRecorder(tmp_path / "keep-lane")
+    summary = run_scenario(scenario, "keep_lane", 0, observer=recorder)
+    chunks = read_chunks(recorder.path)
+    times, _ = column(chunks["/world/plan/chosen"], "LineStrips3D:strips")
+    assert len(times) == summary.cycles == 10
+    assert "/world/plan/candidates" not in chunks and "/world/prediction/means" not in chunks

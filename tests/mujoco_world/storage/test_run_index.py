@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from harm_calibration.cli.runs import register
-from mujoco_world.loop.runner import RunSummary
-from mujoco_world.storage.run_folder import index_run, recording_observer
+from mujoco_world.evaluation.safety import time_to_collision
+from mujoco_world.loop.summary import RunSummary
+from mujoco_world.storage.run_folder import store_run
 from mujoco_world.storage.run_index import (
     INDEX_FILE,
     IndexRow,
@@ -21,7 +22,6 @@ from mujoco_world.storage.run_index import (
     near_crashes,
     read_index,
     severity,
-    time_to_collision,
 )
 
 
@@ -134,22 +134,25 @@ def test_ttc_head_on_and_parallel():
     assert ttc[2] == 0.0
 
 
-def test_recorded_run_keeps_only_near_crash_recordings(tmp_path):
+def test_store_run_keeps_only_near_crash_recordings(tmp_path):
     for name, dist, kept in (("calm", 10.0, False), ("close", 0.1, True)):
-        observer = recording_observer(tmp_path / name, keep="near-crash")
-        observer.recorder.path.parent.mkdir(parents=True)
-        observer.recorder.path.write_bytes(b"rrd")  # stands in for a recording
-        observer.on_end(summary(min_distance=dist, scenario=name))
-        assert observer.recorder.path.exists() is kept
-        assert (observer.row.recording is not None) is kept
+        rrd = tmp_path / name / "recording.rrd"
+        rrd.parent.mkdir(parents=True)
+        rrd.write_bytes(b"rrd")  # stands in for a recording
+        record = store_run(
+            summary(min_distance=dist, scenario=name), tmp_path, name, recording=rrd, keep="near-crash"
+        )
+        assert rrd.exists() is kept
+        assert (record.recording is not None) is kept
     rows = read_index(tmp_path)
     assert [r.run_id for r in rows] == ["calm", "close"]
     assert rows[1].near_crash and not rows[0].near_crash
+    assert rows[1].recording == str(tmp_path / "close" / "recording.rrd") and rows[0].recording is None
 
 
-def test_recording_observer_rejects_bad_keep(tmp_path):
+def test_store_run_rejects_bad_keep(tmp_path):
     with pytest.raises(ValueError, match="keep"):
-        recording_observer(tmp_path / "x", keep="some")
+        store_run(summary(), tmp_path, "x", keep="some")
 
 
 def parser():
@@ -159,8 +162,8 @@ def parser():
 
 
 def test_near_crash_command_json(tmp_path, capsys):
-    index_run(summary(min_distance=0.2, scenario="a"), tmp_path, run_id="a")
-    index_run(summary(min_distance=5.0, scenario="b"), tmp_path, run_id="b")
+    store_run(summary(min_distance=0.2, scenario="a"), tmp_path, "a")
+    store_run(summary(min_distance=5.0, scenario="b"), tmp_path, "b")
     args = parser().parse_args(["near-crash", str(tmp_path), "--json", "--top", "5"])
     assert args.handler(args) == 0
     out = json.loads(capsys.readouterr().out)
@@ -173,7 +176,7 @@ def test_replay_prints_command_without_display(tmp_path, capsys, monkeypatch):
     rrd = tmp_path / "run" / "run1" / "recording.rrd"  # etp run: logs/run/<id>, index in logs/run
     rrd.parent.mkdir(parents=True)
     rrd.write_bytes(b"rrd")
-    index_run(summary(), tmp_path / "run", rrd)
+    store_run(summary(), tmp_path / "run", "run1", recording=rrd)
     args = parser().parse_args(["replay", "run1", "--root", str(tmp_path)])
     assert args.handler(args) == 0
     assert capsys.readouterr().out.strip() == f"rerun {rrd.resolve()}"

@@ -1,0 +1,274 @@
+"""Metrics of a closed-loop run: each metric is one small object behind ``Metric``.
+
+A metric sees the run's planning cycles (``on_cycle``), its measured collisions
+(``on_impact``) and, every ``interval`` physics steps, its state (``sample``); at the
+end it hands its values to the run's summary (``values``: field name -> value). The
+loop samples a state only if no rule stopped the run on it or the rule trusts it (a
+diverged simulation is not measured).
+
+``default_metrics`` gives the built-in metrics; their values fill the typed fields of
+``RunSummary``. A metric of your own returns other names; they land in
+``RunSummary.extra_metrics`` (JSON-able values), and a new built-in one gets a field
+(with a default, so older run records still read):
+``run_scenario(..., metrics=(*default_metrics(config), MyMetric()))``.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from ethical_planner.road_users import VULNERABLE_TYPES
+from mujoco_world.agents.ego_planner import Plan
+from mujoco_world.evaluation.compare import ImpactRecord
+from mujoco_world.evaluation.safety import time_to_collision
+from mujoco_world.loop.config import RunConfig
+from mujoco_world.loop.state import RunState
+from mujoco_world.loop.summary import GROUPS
+
+#: Number of highest risk values kept per group (paper Fig. 5 uses 100).
+TOP_RISKS = 100
+
+
+@runtime_checkable
+class Metric(Protocol):
+    """Something a run measures; subclass it and override what you need (no-ops here).
+
+    Attributes:
+        interval: physics steps between ``sample`` calls (0: never sampled).
+    """
+
+    interval: int = 0
+
+    def start(self, run: RunState) -> None:
+        """Reset before the first step (a metric object may serve several runs)."""
+
+    def on_cycle(self, run: RunState, plan: Plan) -> None:
+        """After each planning cycle (``plan.decision`` is None for planners without one)."""
+
+    def on_impact(self, run: RunState, record: ImpactRecord) -> None:
+        """When a collision has been measured."""
+
+    def sample(self, run: RunState) -> None:
+        """Every ``interval`` physics steps."""
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """Summary fields at the end of the run (name -> value)."""
+        return {}
+
+
+class RiskLog(Metric):
+    """Highest risk values per group along the executed plans (paper Fig. 5).
+
+    Values: ``max_risk`` and ``top_risks`` (up to ``TOP_RISKS`` per group, highest first).
+    """
+
+    def start(self, run: RunState) -> None:
+        """Empty heaps per group."""
+        self.top: dict[str, list[float]] = {g: [] for g in GROUPS}
+
+    def _push(self, group: str, values: np.ndarray) -> None:
+        heap = self.top[group]
+        for value in values:
+            if len(heap) < TOP_RISKS:
+                heapq.heappush(heap, float(value))
+            elif value > heap[0]:
+                heapq.heapreplace(heap, float(value))
+
+    def on_cycle(self, run: RunState, plan: Plan) -> None:
+        """The ego's combined risk and every road user's risk of the chosen plan."""
+        decision = plan.decision
+        if decision is None:
+            return
+        self._push("ego", np.array([decision.ego_combined_risk]))
+        if decision.road_users:
+            risk = np.array([u.risk for u in decision.road_users])
+            vru = np.array([u.type in VULNERABLE_TYPES for u in decision.road_users])
+            self._push("vulnerable", risk[vru])
+            self._push("third_party", risk[~vru])
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``max_risk`` and ``top_risks`` per group."""
+        return {
+            "max_risk": {g: (max(v) if v else 0.0) for g, v in self.top.items()},
+            "top_risks": {g: tuple(sorted(v, reverse=True)) for g, v in self.top.items()},
+        }
+
+
+class ValidityLevels(Metric):
+    """Planning cycles per chosen validity level. Value: ``levels``."""
+
+    def start(self, run: RunState) -> None:
+        """No cycles yet."""
+        self.levels: dict[str, int] = {}
+
+    def on_cycle(self, run: RunState, plan: Plan) -> None:
+        """Count the chosen plan's level."""
+        if plan.decision is None:
+            return
+        key = str(plan.decision.level)
+        self.levels[key] = self.levels.get(key, 0) + 1
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``levels``."""
+        return {"levels": dict(self.levels)}
+
+
+class PlannedCollisionProbability(Metric):
+    """Highest collision probability of any road user along the chosen plans.
+
+    Value: ``max_collision_probability`` (0 without road users or cycles).
+    """
+
+    def start(self, run: RunState) -> None:
+        """Nothing planned yet."""
+        self.highest = 0.0
+
+    def on_cycle(self, run: RunState, plan: Plan) -> None:
+        """The plan's highest per-road-user collision probability."""
+        for u in plan.decision.road_users if plan.decision is not None else ():
+            if u.collision_probability > self.highest:
+                self.highest = float(u.collision_probability)
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``max_collision_probability``."""
+        return {"max_collision_probability": self.highest}
+
+
+class MinDistance(Metric):
+    """Smallest ego-to-road-user geom distance until the ego's first contact.
+
+    Values: ``min_distance`` and ``min_distance_vulnerable`` [m] (negative: overlap;
+    nan if there was none to measure).
+
+    Args:
+        interval: physics steps between measurements.
+    """
+
+    def __init__(self, interval: int) -> None:
+        self.interval = interval
+
+    def start(self, run: RunState) -> None:
+        """Which road users are vulnerable."""
+        self.vulnerable = np.array([t in VULNERABLE_TYPES for t in run.world.types[1:]])
+        self.closest = math.inf
+        self.closest_vulnerable = math.inf
+
+    def sample(self, run: RunState) -> None:
+        """``mj_geomDistance`` from the ego to every road user."""
+        world = run.world
+        if world.n < 2 or world.crashed[0]:
+            return
+        dist = world.ego_distances()
+        self.closest = min(self.closest, float(dist.min()))
+        if self.vulnerable.any():
+            self.closest_vulnerable = min(self.closest_vulnerable, float(dist[self.vulnerable].min()))
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``min_distance`` and ``min_distance_vulnerable``."""
+        return {
+            "min_distance": self.closest if math.isfinite(self.closest) else math.nan,
+            "min_distance_vulnerable": (
+                self.closest_vulnerable if math.isfinite(self.closest_vulnerable) else math.nan
+            ),
+        }
+
+
+class TimeToCollision(Metric):
+    """Smallest constant-velocity time-to-collision of the ego until its first contact.
+
+    Value: ``min_ttc`` [s] (inf if no approach within ``horizon``).
+
+    Args:
+        horizon: look-ahead [s].
+        rate: evaluations per simulated second [Hz] (and one at the start).
+    """
+
+    def __init__(self, horizon: float = 10.0, rate: float = 20.0) -> None:
+        if not (math.isfinite(horizon) and horizon > 0 and math.isfinite(rate) and rate > 0):
+            raise ValueError(f"TimeToCollision: horizon and rate must be > 0, got {horizon}, {rate}")
+        self.horizon = float(horizon)
+        self.rate = float(rate)
+        self.interval = 1
+
+    def start(self, run: RunState) -> None:
+        """Footprints once, then the TTC of the initial state."""
+        self.interval = max(int(round(1.0 / (self.rate * run.dt))), 1)
+        bodies = run.world.scene.bodies
+        length = np.array([2 * b.radius if b.is_round else b.length for b in bodies])
+        width = np.array([2 * b.radius if b.is_round else b.width for b in bodies])
+        self._extent = np.column_stack([length, width])
+        self.lowest = math.inf
+        self.sample(run)
+
+    def sample(self, run: RunState) -> None:
+        """TTC from the true states of every body."""
+        world = run.world
+        if world.n < 2 or world.crashed[0]:
+            return
+        qpos, qvel = world.scene.qpos, world.scene.qvel
+        states = np.column_stack([qpos[:, :2], qpos[:, 2], qvel[:, :2], self._extent])
+        ttc = time_to_collision(states[0], states[1:], self.horizon)
+        self.lowest = min(self.lowest, float(ttc.min()))
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``min_ttc``."""
+        return {"min_ttc": self.lowest}
+
+
+class HarmPerGroup(Metric):
+    """Measured harm summed per group (ego, third_party, vulnerable) over all collisions.
+
+    Value: ``harm``. Walls have no harm (nan) and are left out.
+    """
+
+    def start(self, run: RunState) -> None:
+        """No harm yet."""
+        self.harm = {g: 0.0 for g in GROUPS}
+
+    def on_impact(self, run: RunState, record: ImpactRecord) -> None:
+        """Add both bodies' measured harm to their groups."""
+        for body in (record.a, record.b):
+            if body.group in self.harm and math.isfinite(body.harm_measured):
+                self.harm[body.group] += body.harm_measured
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``harm``."""
+        return {"harm": dict(self.harm)}
+
+
+class TrackingError(Metric):
+    """RMS and largest ego tracking error before any contact.
+
+    Values: ``tracking_rms`` and ``tracking_max`` [m].
+    """
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """From the world's controller bookkeeping."""
+        rms, worst = run.world.tracking_error()
+        return {"tracking_rms": rms, "tracking_max": worst}
+
+
+class Progress(Metric):
+    """Ego arc length along its route at the end. Value: ``progress`` [m]."""
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``World.ego_progress``."""
+        return {"progress": run.world.ego_progress()}
+
+
+def default_metrics(config: RunConfig) -> tuple[Metric, ...]:
+    """The built-in metrics (every metric field of ``RunSummary``)."""
+    return (
+        RiskLog(),
+        ValidityLevels(),
+        PlannedCollisionProbability(),
+        MinDistance(config.distance_interval),
+        TimeToCollision(),
+        HarmPerGroup(),
+        TrackingError(),
+        Progress(),
+    )

@@ -1,0 +1,288 @@
+"""Stop rules of the closed loop: each rule is one small object that may end a run.
+
+The loop checks its rules in order after every physics step whose index is a
+multiple of the rule's ``interval``; the first rule that returns a ``Stop`` ends the
+run. ``default_rules`` gives the built-in ones in their order:
+
+1. ``Diverged``: the simulation cannot be trusted (NaN state, MuJoCo's bad
+   acceleration warning, a penetration beyond the bound): ``failed``.
+2. ``CrashAtRest``: after a crash, every body that touched something has been at
+   rest for ``settle_time`` with no open contact episode: ``crash``.
+3. ``PostCrashTime``: ``post_crash_time`` after the crash: ``crash``.
+4. ``Goal``: before any crash, the ego passed its goal on its route: ``goal``.
+
+``TimeLimit`` (the scenario's duration: ``timeout``, or ``crash`` after a crash) is
+always appended last by the runner, so every run ends. A new rule is a new object
+with ``interval``, ``start`` and ``check`` (see ``StopRule``), passed with the
+defaults: ``run_scenario(..., rules=(*default_rules(config), MyRule()))``.
+
+Which contacts make a crash is one object too (``CrashCriterion``): ``AnyContact``
+(any two bodies touching, the default) or ``EgoContact`` (only contacts of the ego).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from mujoco_world.evaluation.compare import ImpactRecord
+from mujoco_world.loop.config import RunConfig
+from mujoco_world.loop.state import RunState
+from mujoco_world.loop.world import World
+
+#: Outcomes that say the run ended without a crash: a counted collision measured when
+#: the run is closed (an episode still open at the end) turns them into ``crash``.
+NO_CRASH_OUTCOMES = frozenset({"goal", "timeout"})
+
+
+@dataclass(frozen=True, slots=True)
+class Stop:
+    """A rule's verdict that the run is over.
+
+    Attributes:
+        outcome: the run's outcome (``summary.OUTCOMES``).
+        reason: why, in words a person reads.
+        trusted: the last state is valid (metrics still measure it); False for a
+            diverged simulation or a failure.
+        at_rest: the bodies in contact have come to rest, so open contact episodes
+            are complete.
+    """
+
+    outcome: str
+    reason: str
+    trusted: bool = True
+    at_rest: bool = False
+
+
+@runtime_checkable
+class StopRule(Protocol):
+    """A condition that ends a run.
+
+    Attributes:
+        interval: physics steps between checks (set at the latest in ``start``).
+    """
+
+    interval: int
+
+    def start(self, run: RunState) -> None:
+        """Reset before the first step (a rule object may serve several runs)."""
+
+    def check(self, run: RunState) -> Stop | None:
+        """The verdict after the current step, or None to go on."""
+
+
+@runtime_checkable
+class CrashCriterion(Protocol):
+    """Which contacts make a run a crash."""
+
+    def touched(self, world: World) -> bool:
+        """True once a contact that counts has begun (checked after every step)."""
+
+    def counts(self, record: ImpactRecord) -> bool:
+        """True if a measured collision counts as a crash."""
+
+
+class AnyContact(CrashCriterion):
+    """Any two bodies touching (or a body and a wall) make a crash."""
+
+    def touched(self, world: World) -> bool:
+        """Any body has touched something."""
+        return bool(world.recorder.touched.any())
+
+    def counts(self, record: ImpactRecord) -> bool:
+        """Every collision counts."""
+        return True
+
+
+class EgoContact(CrashCriterion):
+    """Only contacts of the ego make a crash; others' collisions are still measured."""
+
+    def touched(self, world: World) -> bool:
+        """The ego (entity 0) has touched something."""
+        return bool(world.recorder.touched[0])
+
+    def counts(self, record: ImpactRecord) -> bool:
+        """Collisions the ego took part in."""
+        return record.involves_ego
+
+
+class Diverged(StopRule):
+    """The simulation cannot be trusted any more: ``failed`` (``World.diverged``).
+
+    Args:
+        max_penetration: largest acceptable geom overlap [m].
+        interval: physics steps between checks.
+    """
+
+    def __init__(self, max_penetration: float, interval: int) -> None:
+        self.max_penetration = max_penetration
+        self.interval = interval
+
+    def start(self, run: RunState) -> None:
+        """Nothing to reset."""
+
+    def check(self, run: RunState) -> Stop | None:
+        """``failed`` with the reason MuJoCo or the penetration bound gives."""
+        why = run.world.diverged(self.max_penetration)
+        if why is None:
+            return None
+        return Stop("failed", f"simulation diverged at t = {run.time:.3f} s: {why}", trusted=False)
+
+
+class CrashAtRest(StopRule):
+    """After a crash, the bodies that touched have been at rest long enough: ``crash``.
+
+    Args:
+        rest_speed: a body below this speed is at rest [m/s].
+        settle_time: how long they must rest, with no contact episode open [s]
+            (secondary collisions may still follow meanwhile).
+        interval: physics steps between checks.
+    """
+
+    def __init__(self, rest_speed: float, settle_time: float, interval: int) -> None:
+        self.rest_speed = rest_speed
+        self.settle_time = settle_time
+        self.interval = interval
+        self._since: float | None = None
+
+    def start(self, run: RunState) -> None:
+        """Forget an earlier rest."""
+        self._since = None
+
+    def check(self, run: RunState) -> Stop | None:
+        """``crash`` once the crashed bodies have rested ``settle_time``."""
+        if run.crash_time is None:
+            return None
+        world = run.world
+        speeds = world.scene.speeds()[world.crashed]
+        if world.recorder.has_open_episodes or not bool((speeds < self.rest_speed).all()):
+            self._since = None
+            return None
+        if self._since is None:
+            self._since = run.time
+        if run.time - self._since < self.settle_time:
+            return None
+        return Stop("crash", "collision; the bodies involved have come to rest", at_rest=True)
+
+
+class PostCrashTime(StopRule):
+    """A fixed time after the crash: ``crash``.
+
+    Args:
+        limit: time after the first counted contact [s].
+        interval: physics steps between checks.
+    """
+
+    def __init__(self, limit: float, interval: int) -> None:
+        self.limit = limit
+        self.interval = interval
+
+    def start(self, run: RunState) -> None:
+        """Nothing to reset."""
+
+    def check(self, run: RunState) -> Stop | None:
+        """``crash`` ``limit`` after the first counted contact."""
+        if run.crash_time is None or run.time - run.crash_time < self.limit:
+            return None
+        return Stop("crash", f"collision; stopped {self.limit} s after it")
+
+
+class Goal(StopRule):
+    """The ego passed its goal on its route before any crash: ``goal``.
+
+    Args:
+        rate: checks per simulated second [Hz] (projecting onto the route costs a
+            k-d tree query).
+        interval_multiple: the interval is rounded to a multiple of this (the other
+            rules' interval), so the goal is checked on the same steps as they are.
+    """
+
+    def __init__(self, rate: float = 10.0, interval_multiple: int = 1) -> None:
+        self.rate = rate
+        self.multiple = interval_multiple
+        self.interval = interval_multiple
+
+    def start(self, run: RunState) -> None:
+        """Set the interval from the physics step."""
+        self.interval = self.multiple * max(1, int(round(1.0 / (self.rate * self.multiple * run.dt))))
+
+    def check(self, run: RunState) -> Stop | None:
+        """``goal`` once the ego's arc length reaches ``World.goal_s``."""
+        world = run.world
+        if run.crash_time is not None or world.ego_progress() < world.goal_s:
+            return None
+        return Stop("goal", f"ego reached s = {world.goal_s:.1f} m on its route")
+
+
+class TimeLimit(StopRule):
+    """The scenario's duration has passed: ``timeout`` (``crash`` after a crash)."""
+
+    def __init__(self) -> None:
+        self.interval = 1
+        self.max_steps = 0
+
+    def start(self, run: RunState) -> None:
+        """The number of physics steps of the scenario's duration."""
+        self.max_steps = int(round(run.scenario.duration / run.dt))
+
+    def check(self, run: RunState) -> Stop | None:
+        """Ends the run after ``max_steps`` steps."""
+        if run.step < self.max_steps:
+            return None
+        outcome = "crash" if run.crash_time is not None else "timeout"
+        return Stop(outcome, f"time limit of {run.scenario.duration} s reached")
+
+
+def default_rules(config: RunConfig) -> tuple[StopRule, ...]:
+    """The built-in rules, in the order they are checked (``TimeLimit`` is added by the runner)."""
+    every = config.distance_interval
+    return (
+        Diverged(config.max_penetration, every),
+        CrashAtRest(config.rest_speed, config.settle_time, every),
+        PostCrashTime(config.post_crash_time, every),
+        Goal(10.0, every),
+    )
+
+
+def final_outcome(stop: Stop, collisions: Sequence[ImpactRecord], crash: CrashCriterion) -> Stop:
+    """The run's verdict once its open contact episodes are closed.
+
+    A collision that counts but was measured only when the run was closed (its
+    episode was still open) turns an outcome of ``NO_CRASH_OUTCOMES`` into ``crash``.
+    """
+    if stop.outcome in NO_CRASH_OUTCOMES and any(crash.counts(c) for c in collisions):
+        return Stop("crash", stop.reason, stop.trusted, stop.at_rest)
+    return stop
+
+
+def check_rules(rules: Sequence[StopRule]) -> None:
+    """Raise ``ValueError`` unless every rule has an integer ``interval`` >= 1 and a ``check``."""
+    for rule in rules:
+        interval = getattr(rule, "interval", None)
+        if not (
+            isinstance(interval, int | np.integer)
+            and interval >= 1
+            and callable(getattr(rule, "check", None))
+        ):
+            raise ValueError(f"stop rule {rule!r} needs an integer interval >= 1 and a check(run) method")
+
+
+__all__ = [
+    "NO_CRASH_OUTCOMES",
+    "AnyContact",
+    "CrashAtRest",
+    "CrashCriterion",
+    "Diverged",
+    "EgoContact",
+    "Goal",
+    "PostCrashTime",
+    "Stop",
+    "StopRule",
+    "TimeLimit",
+    "check_rules",
+    "default_rules",
+    "final_outcome",
+]

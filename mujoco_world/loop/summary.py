@@ -1,0 +1,193 @@
+"""What one closed-loop run produced: ``RunSummary`` and the bodies it simulated.
+
+The summary is the loop's typed result. ``mujoco_world.storage.run_record`` writes it
+(with the run's id, sources and settings) as a run's ``summary.json`` and reads it
+back; every reader above the loop (index, batch aggregate, ``harm_calibration``) goes
+through these records, never through string keys into the JSON.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from ethical_planner.records import to_plain
+from ethical_planner.road_users import RoadUserType, Shape
+from ethical_planner.validation import check, check_positive
+from mujoco_world.evaluation.compare import ImpactRecord
+
+#: Run outcomes.
+OUTCOMES = ("goal", "timeout", "crash", "failed")
+#: Risk groups of the paper's Fig. 5.
+GROUPS = ("ego", "third_party", "vulnerable")
+
+
+@dataclass(frozen=True, slots=True)
+class BodyRecord:
+    """One simulated body as the run saw it.
+
+    Attributes:
+        id: entity index in the scene (0 is the ego; ``ImpactMeasurement`` bodies
+            carry the same index as ``entity``).
+        name: body name ("ego" or the road user's name).
+        type: road-user type.
+        length, width: footprint [m] (pedestrians: a round proxy of diameter
+            min(length, width)).
+        mass: [kg].
+    """
+
+    id: int
+    name: str
+    type: RoadUserType
+    length: float
+    width: float
+    mass: float
+
+    def __post_init__(self) -> None:
+        check(
+            isinstance(self.id, int) and not isinstance(self.id, bool) and self.id >= 0,
+            f"body.id must be an integer >= 0, got {self.id!r}",
+        )
+        object.__setattr__(self, "type", RoadUserType.parse(self.type))
+        check_positive("body", length=self.length, width=self.width, mass=self.mass)
+
+    @property
+    def shape(self) -> Shape:
+        """Footprint as the planner's ``Shape`` [m]."""
+        return Shape(self.length, self.width)
+
+
+@dataclass(frozen=True, slots=True)
+class RunSummary:
+    """Result of one closed-loop run.
+
+    Only the identity, the outcome and the reason are required: a run that failed
+    before its world was built keeps the defaults (nothing measured, nan).
+
+    Attributes:
+        scenario: scenario name. planner: planner name. seed: run seed.
+        outcome: goal, timeout, crash or failed. reason: why the run ended.
+        duration: simulated time [s]. steps: physics steps. cycles: planning cycles.
+        bodies: every simulated body (id = entity index, shape, mass), ego first.
+        collisions: every measured collision with the model's prediction beside it.
+        ego_collided: the ego took part in a collision.
+        max_risk: highest risk per group (ego, third_party, vulnerable) along the
+            executed plans. top_risks: up to 100 highest risk values per group.
+        harm: summed measured harm per group over all collisions.
+        min_distance: smallest ego-to-road-user distance [m] (negative: overlap).
+        min_distance_vulnerable: the same to vulnerable road users [m].
+        min_ttc: smallest constant-velocity time-to-collision of the ego [s] (inf:
+            no approach within the horizon).
+        max_collision_probability: highest collision probability of any road user
+            along the chosen plans.
+        tracking_rms, tracking_max: ego tracking error before any contact [m].
+        progress: ego arc length along its route at the end [m].
+        levels: planning cycles per chosen validity level.
+        timings: wall-clock seconds per part (physics, planning, measurement,
+            control, total) and the real-time factor.
+        extra_metrics: values of metrics added to the run beyond the built-in ones
+            (``loop.metrics``), by name; JSON-able.
+    """
+
+    scenario: str
+    planner: str
+    seed: int
+    outcome: str
+    reason: str
+    duration: float = 0.0
+    steps: int = 0
+    cycles: int = 0
+    bodies: tuple[BodyRecord, ...] = ()
+    collisions: tuple[ImpactRecord, ...] = ()
+    ego_collided: bool = False
+    max_risk: dict[str, float] = field(default_factory=dict)
+    top_risks: dict[str, tuple[float, ...]] = field(default_factory=dict)
+    harm: dict[str, float] = field(default_factory=dict)
+    min_distance: float = math.nan
+    min_distance_vulnerable: float = math.nan
+    min_ttc: float = math.nan
+    max_collision_probability: float = math.nan
+    tracking_rms: float = math.nan
+    tracking_max: float = math.nan
+    progress: float = math.nan
+    levels: dict[str, int] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+    extra_metrics: dict[str, Any] = field(default_factory=dict)
+
+    def body(self, entity: int) -> BodyRecord:
+        """The body with entity index ``entity``.
+
+        Raises:
+            ValueError: no such body in this run.
+        """
+        for body in self.bodies:
+            if body.id == entity:
+                return body
+        raise ValueError(f"run {self.scenario}/{self.planner}/s{self.seed} has no body {entity}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict of every field (``fields.to_plain``)."""
+        return to_plain(self)
+
+    def comparable_dict(self) -> dict[str, Any]:
+        """``to_dict`` without wall-clock timings (for determinism checks)."""
+        out = self.to_dict()
+        out.pop("timings")
+        return out
+
+
+#: Summary fields the loop fills itself; a metric may not set them.
+_LOOP_FIELDS = frozenset(
+    {"scenario", "planner", "seed", "outcome", "reason", "duration", "steps", "cycles"}
+    | {"bodies", "collisions", "ego_collided", "timings", "extra_metrics"}
+)
+
+
+def build_summary(
+    *,
+    scenario: str,
+    planner: str,
+    seed: int,
+    outcome: str,
+    reason: str,
+    duration: float,
+    steps: int,
+    cycles: int,
+    bodies: Sequence[BodyRecord],
+    collisions: Sequence[ImpactRecord],
+    values: Mapping[str, Any],
+    timings: Mapping[str, float],
+) -> RunSummary:
+    """The summary of a finished run from what the loop counted and what its metrics measured.
+
+    Args:
+        scenario, planner, seed, outcome, reason, duration, steps, cycles, bodies,
+            collisions, timings: as in ``RunSummary``.
+        values: the metrics' values by name: a ``RunSummary`` field sets it, any
+            other name goes to ``extra_metrics``.
+
+    Raises:
+        ValueError: a metric value names a field the loop fills itself.
+    """
+    clash = sorted(_LOOP_FIELDS & values.keys())
+    if clash:
+        raise ValueError(f"metric values may not set the summary's own fields {clash}")
+    known = {f.name for f in fields(RunSummary)}
+    return RunSummary(
+        scenario=scenario,
+        planner=planner,
+        seed=int(seed),
+        outcome=outcome,
+        reason=reason,
+        duration=duration,
+        steps=steps,
+        cycles=cycles,
+        bodies=tuple(bodies),
+        collisions=tuple(collisions),
+        ego_collided=any(c.involves_ego for c in collisions),
+        timings=dict(timings),
+        extra_metrics={k: v for k, v in values.items() if k not in known},
+        **{k: v for k, v in values.items() if k in known},
+    )
