@@ -66,13 +66,13 @@ class RunTask:
     planner_config: PlannerConfig | None = None
 
     def __post_init__(self) -> None:
-        run_id(self.scenario, self.planner, self.seed)
+        run_id(self.scenario, self.planner, self.seed, self.planner_config)
         parse_keep(self.keep)
 
     @property
     def run_id(self) -> str:
         """Id of this run (``run_folder.run_id``)."""
-        return run_id(self.scenario, self.planner, self.seed)
+        return run_id(self.scenario, self.planner, self.seed, self.planner_config)
 
     @property
     def run_dir(self) -> Path:

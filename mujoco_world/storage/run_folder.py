@@ -8,7 +8,9 @@ the name itself for catalog, generated and registered names (letters, digits and
 planner configuration), the digits being the start of the SHA-256 of the file's
 resolved absolute path: ``dirA/s.toml`` and ``dirB/s.toml`` get different folders,
 the same file named from another working directory gets the same one (a batch
-resumes it), a moved file gets a new one.
+resumes it), a moved file gets a new one. A planner configuration given as a record
+(``etp --config``) that is not exactly its named preset adds the start of the SHA-256
+of its content to the planner's key.
 
 ``store_run`` writes the run's record (``run_record``), keeps or drops its recording
 (``keep``) and appends its row to ``<out>/index.jsonl`` (``run_index``), in that order.
@@ -18,10 +20,13 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import os
 import re
 from pathlib import Path
 
+from ethical_planner.config import PRESETS, PlannerConfig, preset
+from ethical_planner.records import to_plain
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.summary import RunSummary
 from mujoco_world.storage.recording import RECORDING_FILE
@@ -79,17 +84,26 @@ def source_key(source: str, what: str = "name") -> str:
     return source
 
 
-def run_id(scenario: str, planner: str, seed: int) -> str:
+def run_id(scenario: str, planner: str, seed: int, planner_config: PlannerConfig | None = None) -> str:
     """The id of the run of ``scenario`` with ``planner`` and ``seed`` (module docstring).
 
     Args:
         scenario: catalog or generated name, or a scenario file.
         planner: planner name, or a planner configuration file.
         seed: run seed.
+        planner_config: the configuration the planner runs with, if given explicitly.
+            Unless it is exactly the preset ``planner`` names, the planner's key gets
+            ``-<10 hex digits of the SHA-256 of the configuration>``: two different
+            configurations under one name (``ethical+c`` from ``dirA/c.toml`` and
+            ``dirB/c.toml``) never share a folder, the same configuration resumes.
     """
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise ValueError(f"seed must be an integer, got {seed!r}")
-    return f"{source_key(scenario, 'scenario')}__{source_key(planner, 'planner')}__s{seed}"
+    key = source_key(planner, "planner")
+    if planner_config is not None and not (planner in PRESETS and planner_config == preset(planner)):
+        text = json.dumps(to_plain(planner_config), sort_keys=True, default=str)
+        key = f"{key}-{hashlib.sha256(text.encode('utf-8')).hexdigest()[:_HASH_DIGITS]}"
+    return f"{source_key(scenario, 'scenario')}__{key}__s{seed}"
 
 
 def run_dir(out: str | Path, run: str) -> Path:

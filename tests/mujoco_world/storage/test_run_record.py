@@ -153,3 +153,17 @@ def test_names_that_cannot_name_a_run(bad):
 def test_seed_must_be_an_integer():
     with pytest.raises(ValueError, match="seed"):
         run_id("s", "ethical", 1.5)
+
+
+def test_a_configured_planner_never_shares_a_preset_folder():
+    from ethical_planner.config import preset
+
+    ethical = preset("ethical")
+    assert run_id("s", "ethical", 0, ethical) == "s__ethical__s0"  # the preset itself
+    cautious = ethical.with_overrides({"name": "ethical+c", "risk": {"max_acceptable_risk": 0.01}})
+    bolder = ethical.with_overrides({"name": "ethical+c", "risk": {"max_acceptable_risk": 0.2}})
+    a, b = run_id("s", "ethical+c", 0, cautious), run_id("s", "ethical+c", 0, bolder)
+    assert a != b and a.startswith("s__ethical+c-") and b.startswith("s__ethical+c-")
+    assert run_id("s", "ethical+c", 0, cautious) == a  # the same configuration resumes
+    changed = ethical.with_overrides({"risk": {"max_acceptable_risk": 0.01}})  # still named "ethical"
+    assert run_id("s", "ethical", 0, changed) != "s__ethical__s0"
