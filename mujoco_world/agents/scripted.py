@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ethical_planner.config import VehicleLimits
+from ethical_planner.config import VehicleConfig
 from ethical_planner.planner import Trajectory
 from ethical_planner.sampling import frenet_to_candidates
 from ethical_planner.validation import check, check_non_negative, check_positive
@@ -199,6 +199,6 @@ EGO_PLANNERS.register("keep_lane", lambda setup: ScriptedPlanner(keep_lane(), se
 EGO_PLANNERS.register(
     "emergency_brake",
     lambda setup: ScriptedPlanner(
-        brake(VehicleLimits().emergency_deceleration, name="emergency_brake"), setup
+        brake(VehicleConfig().emergency_deceleration, name="emergency_brake"), setup
     ),
 )

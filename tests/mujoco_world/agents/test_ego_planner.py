@@ -143,7 +143,7 @@ def test_scripted_lane_change_follows_the_quintic():
 def test_scripted_emergency_brake_stops_the_ego_where_the_kinematics_say():
     summary = run_scenario(open_road(duration=4.0), "emergency_brake")
     assert summary.planner == "emergency_brake" and summary.outcome == "timeout"
-    # 10 m/s at 8 m/s^2 (VehicleLimits.emergency_deceleration): 6.25 m from s = 20 m.
+    # 10 m/s at 8 m/s^2 (VehicleConfig.emergency_deceleration): 6.25 m from s = 20 m.
     assert summary.progress == pytest.approx(26.25, abs=0.15)
 
 
