@@ -63,7 +63,7 @@ CASES = [
     ("random-huge", ["demo", "--random", "100000000"], {}, "one batch takes at most 100000"),
     ("random-float", ["demo", "--random", "1e8"], {}, "argument --random: invalid int value"),
     ("workers-zero", ["demo", "--workers", "0"], {}, "--workers must be >= 1"),
-    ("planner-unknown", ["demo", "--planners", "reckless"], {}, "unknown planner preset 'reckless'"),
+    ("planner-unknown", ["demo", "--planners", "reckless"], {}, "unknown planner 'reckless'; allowed: ethical"),
     ("planners-twice", ["demo", "--planners", "ethical,ethical"], {}, "--planners lists ethical more than once"),
     ("planners-empty", ["demo", "--planners", ","], {}, "--planners must name at least one item"),
     ("scenario-unknown", ["demo", "--scenarios", "nope"], {}, "nope"),
@@ -175,10 +175,11 @@ def _never(*args, **kwargs):
 
 @pytest.mark.parametrize(("argv", "files", "message"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
 def test_bad_input_is_exit_2_naming_the_field_or_file(tmp_path, capsys, monkeypatch, argv, files, message):
-    import mujoco_world.loop.batch as batch
+    import mujoco_world.experiments.batch as batch
     import mujoco_world.loop.runner as runner
 
     monkeypatch.setattr(runner, "run_scenario", _never)
+    monkeypatch.setattr(batch, "run_scenario", _never)
     monkeypatch.setattr(batch, "run_batch", _never)
     monkeypatch.chdir(tmp_path)
     for name, content in files.items():
