@@ -198,11 +198,11 @@ def _headings_and_speeds(
     states: list, times: np.ndarray, positions: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray] | str:
     """Recorded headings [rad] and speeds [m/s], missing ones derived from the positions; or why not."""
+    if len(states) < 2:
+        return "a single state"
     headings = _state_array(states, "orientation")
     speeds = _state_array(states, "velocity")
     if headings is None or speeds is None:
-        if len(states) < 2:
-            return "a single state"
         # Derive what is missing from the positions (central differences).
         vel = np.gradient(positions, times, axis=0)
         if speeds is None:
