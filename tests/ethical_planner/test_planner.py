@@ -352,3 +352,35 @@ def test_cause_4_an_overtake_on_a_clear_road_is_not_punished():
     assert ethical.level == Validity.VALID
     assert ethical.trajectory.y.max() > 2.5  # into the free lane
     assert reference.trajectory.y.max() < 1.0  # behind the cyclist
+
+
+def test_the_readme_predictor_example_runs_and_its_registration_works(monkeypatch):
+    """README "The planner in five lines": the planner, then a predictor of one's own."""
+    import re
+    from pathlib import Path
+
+    from ethical_planner.prediction import PREDICTORS, ConstantTurnRatePredictor
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    section = readme[readme.index("## The planner in five lines") :]
+    section = section[: section.index("\n## ", 1)]
+    blocks = re.findall(r"```python\n(.*?)```", section, re.S)
+    assert len(blocks) == 2
+    monkeypatch.setattr(PREDICTORS, "_entries", dict(PREDICTORS._entries))  # undone after the test
+    namespace: dict = {}
+    for code in blocks:
+        exec(compile(code, "README.md", "exec"), namespace)  # noqa: S102 - our own README
+    assert namespace["decision"].trajectory.t.size > 1
+    planner, situation = namespace["planner"], namespace["situation"]
+    assert planner.predictor.name == "cautious"
+    times = np.linspace(0.0, 3.0, 31)
+    base = ConstantTurnRatePredictor(namespace["config"].prediction).predict(situation.road_users, times)
+    doubled = planner.predictor.predict(situation.road_users, times)
+    np.testing.assert_array_equal(doubled.cov, 2.0 * base.cov)
+    np.testing.assert_array_equal(doubled.mean, base.mean)
+    # registered under its name, a TOML's [prediction] model = "cautious" chooses it
+    by_name = Planner(
+        preset("ethical").with_overrides({"prediction": {"model": "cautious"}}), situation.environment
+    )
+    assert by_name.predictor.name == "cautious"
+    assert "cautious" in PREDICTORS
