@@ -22,6 +22,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ethical_planner.geometry import rectangle_half_extent
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.registry import Registry
 from ethical_planner.road_users import LegalCorridor, RoadUserType
@@ -442,8 +443,9 @@ def _leaders(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarra
     lateral = np.abs(-dxn * s + dyn * c)
     rel = view.yaw[None, :] - heading
     length, width = view.length[None, :], view.width[None, :]
-    half_along = 0.5 * (length * np.abs(np.cos(rel)) + width * np.abs(np.sin(rel)))
-    half_across = 0.5 * (length * np.abs(np.sin(rel)) + width * np.abs(np.cos(rel)))
+    # the footprints' half-extents along and across the route (in the route's frame)
+    half_along = rectangle_half_extent(rel, length, width, 1.0, 0.0)
+    half_across = rectangle_half_extent(rel, length, width, 0.0, 1.0)
     me = rows + 1
     along = samples[nearest] + dxn * c + dyn * s
     gap = along - 0.5 * view.length[me, None] - half_along
