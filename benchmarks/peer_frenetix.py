@@ -18,7 +18,7 @@ timed, per repetition:
     all costs for every valid candidate, as Frenetix-Motion-Planner calls it) and ``sort``.
 
 ``frenetix`` is an optional peer, never a dependency of the planner: it is imported
-only when a peer timing is asked for. ``python -m ethical_planner.peer_frenetix``
+only when a peer timing is asked for. ``python -m benchmarks.peer_frenetix``
 prints a self-check table.
 """
 

@@ -221,7 +221,7 @@ class Planner:
         workers: Workers | None = None,
     ) -> None:
         if not isinstance(config, PlannerConfig):
-            raise ValueError("config must be a PlannerConfig (see ethical_planner.preset)")
+            raise ValueError("config must be a PlannerConfig (see ethical_planner.config.preset)")
         if not isinstance(environment, RoadEnvironment):
             raise ValueError("environment must be a RoadEnvironment")
         if not isinstance(ego_shape, Shape):

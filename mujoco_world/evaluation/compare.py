@@ -88,7 +88,7 @@ class ImpactRecord:
         return self.measurement.a.entity == 0
 
     def to_dict(self) -> dict:
-        """JSON-able dict of every field (``fields.to_plain``; read back by ``fields.from_mapping``)."""
+        """JSON-able dict of every field (``records.to_plain``; read back by ``records.from_mapping``)."""
         return to_plain(self)
 
 

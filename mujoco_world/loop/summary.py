@@ -128,7 +128,7 @@ class RunSummary:
         raise ValueError(f"run {self.scenario}/{self.planner}/s{self.seed} has no body {entity}")
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able dict of every field (``fields.to_plain``)."""
+        """JSON-able dict of every field (``ethical_planner.records.to_plain``)."""
         return to_plain(self)
 
     def comparable_dict(self) -> dict[str, Any]:

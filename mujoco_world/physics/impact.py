@@ -152,7 +152,7 @@ class ImpactMeasurement:
     ended_in_contact: bool = False
 
     def to_dict(self) -> dict:
-        """JSON-able dict of every field (infinite masses become "inf"; see ``fields.to_plain``)."""
+        """JSON-able dict of every field (infinite masses become "inf"; see ``records.to_plain``)."""
         return to_plain(self)
 
 
