@@ -143,11 +143,11 @@ def test_world_groups_cover_every_subpackage():
     assert found - {"data"} == set(WORLD_GROUPS)
 
 
-@pytest.mark.parametrize(
-    ("module", "path"),
-    [(m, p) for m, p in _modules() if m.count(".") >= 2 and m.startswith("mujoco_world.")],
-    ids=[m for m, _ in _modules() if m.count(".") >= 2 and m.startswith("mujoco_world.")],
-)
+#: Every module of a world group, the group's ``__init__`` included.
+_GROUPED = [(m, p) for m, p in _modules() if m.split(".")[0] == "mujoco_world" and m.count(".") >= 1]
+
+
+@pytest.mark.parametrize(("module", "path"), _GROUPED, ids=[m for m, _ in _GROUPED])
 def test_world_groups_import_only_groups_below(module, path):
     rank = {group: k for k, group in enumerate(WORLD_GROUPS)}
     own = rank[module.split(".")[1]]
