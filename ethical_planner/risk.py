@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from ethical_planner.collision_probability import collision_probability
+from ethical_planner.collision_probability import CollisionProbability, collision_probability
 from ethical_planner.config import RiskConfig
 from ethical_planner.dv_correction import DeltaVCorrection
 from ethical_planner.environment import RoadEnvironment
@@ -106,6 +106,55 @@ def outside_drivable_area(
     return outside
 
 
+def prediction_collision_probability(
+    candidates: Candidates,
+    prediction: Prediction,
+    ego_shape: Shape,
+    gate_sigmas: float,
+    workers: Workers | None = None,
+) -> CollisionProbability:
+    """Collision probabilities of every candidate with every predicted road user.
+
+    A Gaussian-mixture prediction (K components with a shared mean) is integrated in
+    one call with each component as a road user of its own; its probability is the
+    weighted sum sum_k w_k(t) p_k(u, t), and the mean overlap that of the shared mean.
+
+    Returns:
+        Probabilities and mean overlaps, shape (n, n_obs, n_t).
+    """
+    k = prediction.n_components
+    if k == 1:
+        mean, cov, heading = prediction.mean, prediction.cov, prediction.heading
+        length, width = prediction.length, prediction.width
+    else:
+        n_obs, n_t = prediction.mean.shape[:2]
+        # Road user o's component c becomes virtual road user o * K + c.
+        mean = np.repeat(prediction.mean, k, axis=0)
+        cov = np.moveaxis(prediction.component_cov, 2, 1).reshape(n_obs * k, n_t, 2, 2)
+        heading = np.repeat(prediction.heading, k, axis=0)
+        length, width = np.repeat(prediction.length, k), np.repeat(prediction.width, k)
+    cp = collision_probability(
+        candidates.x,
+        candidates.y,
+        candidates.yaw,
+        ego_shape.length,
+        ego_shape.width,
+        mean,
+        cov,
+        heading,
+        length,
+        width,
+        gate_sigmas=gate_sigmas,
+        workers=workers,
+    )
+    if k == 1:
+        return cp
+    n = candidates.x.shape[0]
+    per_component = cp.probability.reshape(n, n_obs, k, n_t)
+    probability = np.einsum("nokt,otk->not", per_component, prediction.component_weight)
+    return CollisionProbability(np.clip(probability, 0.0, 1.0), cp.mean_overlap[:, ::k])
+
+
 def assess_risk(
     candidates: Candidates,
     prediction: Prediction,
@@ -133,20 +182,7 @@ def assess_risk(
         outside_job = workers.submit(
             lambda: outside_drivable_area(candidates, ego_shape, environment, config.road_edge_margin)
         )
-    cp = collision_probability(
-        candidates.x,
-        candidates.y,
-        candidates.yaw,
-        ego_shape.length,
-        ego_shape.width,
-        prediction.mean,
-        prediction.cov,
-        prediction.heading,
-        prediction.length,
-        prediction.width,
-        gate_sigmas=config.gate_sigmas,
-        workers=workers,
-    )
+    cp = prediction_collision_probability(candidates, prediction, ego_shape, config.gate_sigmas, workers)
     p = cp.probability
     harm_obs = np.zeros((n, k, n_t))
     harm_ego = np.zeros((n, k, n_t))

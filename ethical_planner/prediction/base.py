@@ -10,7 +10,7 @@ returning a ``Prediction`` can stand in its place: the planner and the world tak
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -24,6 +24,13 @@ from ethical_planner.road_users import MOTORISED_TYPES, VULNERABLE_TYPES, RoadUs
 class Prediction:
     """Predicted Gaussian positions of every other road user over the horizon.
 
+    A prediction is one bivariate normal per road user and step, or a Gaussian
+    mixture with a shared mean: ``component_weight`` and ``component_cov`` then hold
+    its K components, and ``cov`` is the mixture's own covariance
+    (sum_k w_k Sigma_k, what a single-Gaussian consumer such as a drawing reads). A
+    collision probability of a mixture is the weighted sum of its components'
+    (``ethical_planner.risk.assess_risk``).
+
     Attributes:
         ids: road-user ids, shape (n_obs,).
         types: road-user types, length n_obs.
@@ -33,6 +40,10 @@ class Prediction:
         speed: [m/s], shape (n_obs, n_t).
         length, width: footprint [m], shape (n_obs,).
         mass: [kg], shape (n_obs,).
+        component_weight: mixture weights, shape (n_obs, n_t, K), >= 0 and summing to
+            1 over K; None for a single Gaussian.
+        component_cov: the components' covariances [m^2], shape (n_obs, n_t, K, 2, 2),
+            symmetric PSD; None for a single Gaussian.
     """
 
     ids: np.ndarray
@@ -44,6 +55,8 @@ class Prediction:
     length: np.ndarray
     width: np.ndarray
     mass: np.ndarray
+    component_weight: np.ndarray | None = None
+    component_cov: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n_obs = len(self.types)
@@ -68,17 +81,35 @@ class Prediction:
             if np.any(np.asarray(getattr(self, name)) <= 0):
                 raise ValueError(f"Prediction.{name} must be > 0 for every road user")
         if n_obs:
-            asym = np.abs(self.cov - np.swapaxes(self.cov, -1, -2)).max()
-            if asym > 1e-9 * max(1.0, np.abs(self.cov).max()):
-                raise ValueError("Prediction.cov must be symmetric")
-            eig_min = np.linalg.eigvalsh(self.cov)[..., 0]
-            bad = np.argwhere(eig_min < -1e-9)
-            if len(bad):
-                k, t = bad[0]
-                raise ValueError(
-                    f"Prediction.cov of road user {self.ids[k]} at step {t} is not positive "
-                    f"semidefinite (smallest eigenvalue {eig_min[k, t]:.3g} m^2)"
-                )
+            _check_covariance("cov", self.cov, self.ids)
+        self._check_components(n_obs, n_t)
+
+    def _check_components(self, n_obs: int, n_t: int) -> None:
+        """Both mixture fields or neither; shapes, weights summing to 1, PSD covariances."""
+        weight, cov = self.component_weight, self.component_cov
+        if weight is None and cov is None:
+            return
+        if weight is None or cov is None:
+            raise ValueError("Prediction.component_weight and component_cov must be given together")
+        weight, cov = np.asarray(weight), np.asarray(cov)
+        k = weight.shape[-1] if weight.ndim == 3 else -1
+        for name, value, shape in (
+            ("component_weight", weight, (n_obs, n_t, k)),
+            ("component_cov", cov, (n_obs, n_t, k, 2, 2)),
+        ):
+            if value.shape != shape or k < 1:
+                raise ValueError(f"Prediction.{name} must have shape {shape} with K >= 1, got {value.shape}")
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"Prediction.{name} must be finite (found NaN or inf)")
+        if np.any(weight < 0) or not np.allclose(weight.sum(-1), 1.0, atol=1e-9):
+            raise ValueError("Prediction.component_weight must be >= 0 and sum to 1 over the components")
+        if n_obs:
+            _check_covariance("component_cov", cov, self.ids)
+
+    @property
+    def n_components(self) -> int:
+        """Gaussian components per road user and step (1: a single Gaussian)."""
+        return 1 if self.component_weight is None else int(np.shape(self.component_weight)[-1])
 
     @property
     def n_obs(self) -> int:
@@ -100,23 +131,38 @@ class Prediction:
 
         A zero or degenerate covariance would make the collision probability a
         step function; the reference uses 0.1 I for ground-truth predictions.
+        A mixture's components are floored each, and its ``cov`` recomputed from them.
         """
         if self.n_obs == 0:
             return self
-        eigval, eigvec = np.linalg.eigh(self.cov)
-        eigval = np.maximum(eigval, floor)
-        cov = np.einsum("...ij,...j,...kj->...ik", eigvec, eigval, eigvec)
-        return Prediction(
-            self.ids,
-            self.types,
-            self.mean,
-            cov,
-            self.heading,
-            self.speed,
-            self.length,
-            self.width,
-            self.mass,
+        weight, components = self.component_weight, self.component_cov
+        if components is None:
+            cov = floor_eigenvalues(self.cov, floor)
+        else:
+            components = floor_eigenvalues(components, floor)
+            cov = np.einsum("otk,otkij->otij", weight, components)
+        return replace(self, cov=cov, component_cov=components)
+
+
+def _check_covariance(name: str, cov: np.ndarray, ids: np.ndarray) -> None:
+    """Symmetric positive semidefinite 2x2 matrices in the last two axes (axis 0: road users, 1: steps)."""
+    asym = np.abs(cov - np.swapaxes(cov, -1, -2)).max()
+    if asym > 1e-9 * max(1.0, np.abs(cov).max()):
+        raise ValueError(f"Prediction.{name} must be symmetric")
+    eig_min = np.linalg.eigvalsh(cov)[..., 0]
+    bad = np.argwhere(eig_min < -1e-9)
+    if len(bad):
+        k, t = bad[0][:2]
+        raise ValueError(
+            f"Prediction.{name} of road user {ids[k]} at step {t} is not positive "
+            f"semidefinite (smallest eigenvalue {eig_min[tuple(bad[0])]:.3g} m^2)"
         )
+
+
+def floor_eigenvalues(cov: np.ndarray, floor: float) -> np.ndarray:
+    """Symmetric 2x2 matrices [m^2], shape (..., 2, 2), with eigenvalues raised to at least ``floor``."""
+    eigval, eigvec = np.linalg.eigh(cov)
+    return np.einsum("...ij,...j,...kj->...ik", eigvec, np.maximum(eigval, floor), eigvec)
 
 
 @runtime_checkable
