@@ -119,10 +119,13 @@ def time_call(function: Callable[[], object], repetitions: int) -> dict[str, flo
     }
 
 
-def time_planner(grid: str, n_road_users: int, repetitions: int = 20) -> dict[str, float]:
-    """Time full ethical planning cycles on a standard grid."""
+def time_planner(
+    grid: str, n_road_users: int, repetitions: int = 20, delta_v_model: str = "eq1"
+) -> dict[str, float]:
+    """Time full ethical planning cycles on a standard grid with a delta-v model."""
     scene = bench_scene(n_road_users)
-    planner = Planner(grid_config(grid), scene.environment)
+    config = grid_config(grid).with_overrides({"risk": {"delta_v_model": delta_v_model}})
+    planner = Planner(config, scene.environment)
     result = time_call(lambda: planner.plan(scene.ego, scene.road_users), repetitions)
     decision = planner.plan(scene.ego, scene.road_users)
     result["n_trajectories"] = len(decision.candidate_levels)
@@ -194,6 +197,7 @@ def run_benchmark(
     for grid in grids:
         for count in road_user_counts:
             ours = time_planner(grid, count, repetitions)
+            planar = time_planner(grid, count, repetitions, "planar_impulse")
             theirs = time_peer(grid, count, repetitions) if peer else None
             row = {
                 "grid": grid,
@@ -202,6 +206,8 @@ def run_benchmark(
                 "ours_median_ms": round(ours["median_ms"], 2),
                 "ours_p90_ms": round(ours["p90_ms"], 2),
                 "stages_ms": ours["stage_ms"],
+                "planar_median_ms": round(planar["median_ms"], 2),
+                "planar_stages_ms": planar["stage_ms"],
                 "frenetix_median_ms": None if theirs is None else round(theirs["median_ms"], 2),
                 "speedup": None if theirs is None else round(theirs["median_ms"] / ours["median_ms"], 2),
             }
@@ -277,18 +283,21 @@ def format_table(rows: list[dict]) -> str:
     """Plain-text table of ``run_benchmark`` rows."""
     header = (
         f"{'candidates':>10} {'road users':>10} {'ours median':>12} {'ours p90':>9} "
-        f"{'frenetix':>9} {'frenetix/ours':>13}"
+        f"{'planar dv':>10} {'planar/eq1':>10} {'frenetix':>9} {'frenetix/ours':>13}"
     )
     lines = [header, "-" * len(header)]
     for r in rows:
         peer = "n/a" if r["frenetix_median_ms"] is None else f"{r['frenetix_median_ms']:.2f}"
         ratio = "n/a" if r["speedup"] is None else f"{r['speedup']:.2f}x"
+        overhead = r["planar_median_ms"] / r["ours_median_ms"] if r["ours_median_ms"] else float("nan")
         lines.append(
             f"{r['n_trajectories']:>10} {r['road_users']:>10} {r['ours_median_ms']:>9.2f} ms "
-            f"{r['ours_p90_ms']:>6.2f} ms {peer:>9} {ratio:>13}"
+            f"{r['ours_p90_ms']:>6.2f} ms {r['planar_median_ms']:>7.2f} ms {overhead:>9.2f}x "
+            f"{peer:>9} {ratio:>13}"
         )
     lines.append(
-        "times in ms, medians over the repetitions; frenetix = its C++ cycle with "
+        "times in ms, medians over the repetitions; ours = the cycle with Eq. 1 delta-v, planar dv = "
+        "the same with [risk] delta_v_model = planar_impulse; frenetix = its C++ cycle with "
         "CalculateCollisionProbabilityFast (no harm, principles or R_max)"
     )
     return "\n".join(lines)

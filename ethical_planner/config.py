@@ -18,10 +18,12 @@ from typing import Any
 import numpy as np
 
 from ethical_planner.harm import HarmModel
+from ethical_planner.impulse import DeltaVModel, RestitutionLaw
 from ethical_planner.records import errors_in, from_mapping, read_toml
 from ethical_planner.registry import Registry
 from ethical_planner.validation import (
     check,
+    check_finite,
     check_non_negative,
     check_numeric_fields_finite,
     check_positive,
@@ -303,8 +305,12 @@ class RiskConfig:
             comes closer than this to the edge of the drivable area [m]: kerbs and walls
             stand right at the edge, and a plan that skims them at an angle hits them
             with a few centimetres of tracking error (measured in overtake_cyclist).
-        delta_v_correction: path of a ``calibration.json`` written by ``etp impacts``
-            (a ``DeltaVCorrection``); None plans with the plain Eq. 1 delta-v.
+        delta_v_model: ``eq1`` (paper Eq. 1, the default) or ``planar_impulse`` (an impulse
+            at the first contact of the predicted footprints, ``ethical_planner.impulse``).
+        restitution_law: restitution against the normal closing speed (planar model).
+        impulse_ratio: largest tangential / normal impulse of the planar model (Coulomb
+            friction between bodies; the world's contact friction is 0.3); ``inf`` is
+            full stick, a common tangential velocity at the contact point.
     """
 
     harm_model: HarmModel = HarmModel.REDUCED_SYM
@@ -313,17 +319,27 @@ class RiskConfig:
     max_acceptable_risk: float = 0.002
     boundary_harm: bool = True
     road_edge_margin: float = 0.25
-    delta_v_correction: str | None = None
+    delta_v_model: DeltaVModel = DeltaVModel.EQ1
+    restitution_law: RestitutionLaw = field(default_factory=RestitutionLaw)
+    impulse_ratio: float = 0.3
 
     def __post_init__(self) -> None:
         for name in ("harm_model", "pedestrian_model"):
             object.__setattr__(
                 self, name, parse_enum(HarmModel, getattr(self, name), "harm model", f"risk.{name}")
             )
-        check_numeric_fields_finite("risk", self)
+        model = parse_enum(DeltaVModel, self.delta_v_model, "delta-v model", "risk.delta_v_model")
+        object.__setattr__(self, "delta_v_model", model)
         check(
-            self.delta_v_correction is None or isinstance(self.delta_v_correction, str),
-            "risk.delta_v_correction must be the path of a calibration JSON file or unset",
+            isinstance(self.restitution_law, RestitutionLaw),
+            "risk.restitution_law must be a table with e_high, e_low, speed_scale",
+        )
+        check_finite("risk", gate_sigmas=self.gate_sigmas, max_acceptable_risk=self.max_acceptable_risk)
+        check(
+            isinstance(self.impulse_ratio, int | float)
+            and not isinstance(self.impulse_ratio, bool)
+            and self.impulse_ratio >= 0,
+            f"risk.impulse_ratio must be >= 0 (inf: full stick), got {self.impulse_ratio!r}",
         )
         check(self.gate_sigmas > 0, "risk.gate_sigmas must be > 0")
         check_non_negative("risk", road_edge_margin=self.road_edge_margin)
@@ -576,19 +592,10 @@ def preset(name: str) -> PlannerConfig:
 def load_config(path: str | Path, base: str = "ethical") -> PlannerConfig:
     """Load a TOML file of overrides on top of the preset ``base`` (key ``preset`` wins).
 
-    A relative ``risk.delta_v_correction`` path is relative to the TOML file's folder.
-
     Raises:
         ValueError: unreadable file, unknown preset or key, invalid value; the message
             names the file and the dotted key.
     """
     data = read_toml(path, "planner configuration")
     with errors_in(path):
-        config = preset(data.pop("preset", base)).with_overrides(data)
-    correction = config.risk.delta_v_correction
-    if correction is not None and not Path(correction).is_absolute():
-        resolved = str(Path(path).parent / correction)
-        config = dataclasses.replace(
-            config, risk=dataclasses.replace(config.risk, delta_v_correction=resolved)
-        )
-    return config
+        return preset(data.pop("preset", base)).with_overrides(data)

@@ -27,8 +27,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import expit
 
-from ethical_planner.dv_correction import DeltaVCorrection
-from ethical_planner.geometry import impact_offset_fraction, velocity_angle, wrap_angle, wrap_angle_in_place
+from ethical_planner.geometry import wrap_angle, wrap_angle_in_place
+from ethical_planner.impulse import DeltaVModel, RestitutionLaw, planar_impulse
 from ethical_planner.records import from_mapping
 from ethical_planner.validation import (
     check_finite,
@@ -546,6 +546,39 @@ class CollisionHarm:
         yield self.harm_obs
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class _Body:
+    """Inputs of a delta-v model for one body (broadcastable arrays)."""
+
+    mass: ArrayLike
+    pos: np.ndarray
+    yaw: ArrayLike
+    vel: ArrayLike
+    shape: tuple[ArrayLike, ArrayLike] | None
+    round: ArrayLike
+
+
+def _dv_eq1(ego: _Body, obs: _Body, restitution: RestitutionLaw | None, ratio: float):  # noqa: ANN202
+    return delta_v(ego.mass, obs.mass, ego.vel, obs.vel)
+
+
+def _dv_planar(ego: _Body, obs: _Body, restitution: RestitutionLaw | None, ratio: float):  # noqa: ANN202
+    result = planar_impulse(
+        positive_array("ego_mass", ego.mass, "[kg]"), ego.pos, finite_array("ego_yaw", ego.yaw), ego.shape[0],
+        ego.shape[1], vector_array("ego_vel", ego.vel, "[m/s]"), positive_array("obs_mass", obs.mass, "[kg]"),
+        obs.pos, finite_array("obs_yaw", obs.yaw), obs.shape[0], obs.shape[1],
+        vector_array("obs_vel", obs.vel, "[m/s]"), restitution, ratio, round_b=obs.round,
+    )  # fmt: skip
+    return result.dv_a, result.dv_b
+
+
+#: One function per delta-v model: (ego, other, restitution law, impulse ratio) -> (dv_ego, dv_obs).
+_DELTA_V: dict[DeltaVModel, Callable[..., tuple[np.ndarray, np.ndarray]]] = {
+    DeltaVModel.EQ1: _dv_eq1,
+    DeltaVModel.PLANAR_IMPULSE: _dv_planar,
+}
+
+
 def _select(condition: np.ndarray, if_true: np.ndarray, if_false: np.ndarray) -> np.ndarray:
     """``np.where(condition, if_true, if_false)``, written into ``if_false`` when it fits."""
     out = _own(if_false, condition, if_true)
@@ -568,21 +601,21 @@ def collision_harm(
     model: HarmModel | str = DEFAULT_MODEL,
     pedestrian_model: HarmModel | str = DEFAULT_PEDESTRIAN_MODEL,
     *,
-    dv_correction: DeltaVCorrection | None = None,
+    delta_v_model: DeltaVModel | str = DeltaVModel.EQ1,
+    restitution: RestitutionLaw | None = None,
+    impulse_ratio: float = 0.3,
+    obs_round: ArrayLike = False,
     ego_shape: tuple[ArrayLike, ArrayLike] | None = None,
     obs_shape: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> CollisionHarm:
     """Harm of the ego and of another road user if they collide in the given states.
 
-    Delta-v by Eq. 1 and impact angles as in ``impact_angles``. A protected partner:
+    Delta-v by ``delta_v_model`` (Eq. 1, or the planar impulse model of
+    ``ethical_planner.impulse`` with ``restitution`` and ``impulse_ratio``, which needs
+    both shapes) and impact angles as in ``impact_angles``. A protected partner:
     both harms by ``model``, each with its own impact angle. An unprotected partner
     (pedestrian, cyclist, motorcyclist): its harm by ``pedestrian_model``, the ego's
     harm by the ignore-angle model (SPEC section 3).
-
-    With ``dv_correction``, both delta-v (one impulse) are multiplied by its factor for
-    the angle between the velocity directions (``velocity_angle``) and the impact
-    offset fraction (``impact_offset_fraction``, which needs both shapes) before the
-    harm is evaluated; the returned ``dv_ego`` and ``dv_obs`` are the corrected ones.
 
     Typical planner shapes: ego arrays (n_traj, 1, n_t), other (1, n_obs, n_t),
     vectors with a trailing axis of 2, ``obs_unprotected`` (1, n_obs, 1).
@@ -599,11 +632,15 @@ def collision_harm(
         obs_unprotected: bool array, True where the other road user is unprotected.
         model: harm model of protected road users.
         pedestrian_model: harm model of unprotected road users.
-        dv_correction: optional delta-v correction (None: plain Eq. 1).
-        ego_shape: (length, width) of the ego [m], broadcastable; required with
-            ``dv_correction``, unused without it.
+        delta_v_model: ``eq1`` or ``planar_impulse``.
+        restitution: restitution law of the planar model (default ``RestitutionLaw()``).
+        impulse_ratio: largest tangential / normal impulse of the planar model (inf: stick).
+        obs_round: bool, broadcastable: the other road user is a disc (pedestrians) in the
+            planar model.
+        ego_shape: (length, width) of the ego [m], broadcastable; required by the planar
+            model, unused by Eq. 1.
         obs_shape: (length, width) of the other road user [m], each broadcastable
-            (e.g. shape (1, n_obs, 1)); required with ``dv_correction``, unused without it.
+            (e.g. shape (1, n_obs, 1)); required by the planar model.
 
     Returns:
         ``CollisionHarm`` with arrays of the broadcast shape (vectors without their last axis).
@@ -611,7 +648,7 @@ def collision_harm(
     Raises:
         ValueError: non-positive or non-finite mass, non-finite state, vectors without a
             last axis of 2, ``obs_unprotected`` not boolean, unknown model, a shape
-            missing (or not > 0) while ``dv_correction`` is given.
+            missing (or not > 0) with the planar model.
 
     """
     protected_c = coefficients(model)
@@ -622,23 +659,17 @@ def collision_harm(
             f"obs_unprotected must be boolean (True for pedestrians, cyclists, motorcyclists), "
             f"got dtype {unprotected.dtype}"
         )
-    dv_ego, dv_obs = delta_v(ego_mass, obs_mass, ego_vel, obs_vel)
     ep = vector_array("ego_pos", ego_pos, "[m]")
     op = vector_array("obs_pos", obs_pos, "[m]")
-    if dv_correction is not None:
-        if ego_shape is None or obs_shape is None:
-            raise ValueError(
-                "collision_harm: dv_correction needs ego_shape=(length, width) and "
-                "obs_shape=(length, width) [m] for the impact offset"
-            )
-        ev = vector_array("ego_vel", ego_vel, "[m/s]")
-        ov = vector_array("obs_vel", obs_vel, "[m/s]")
-        offset = impact_offset_fraction(
-            ep, ev, ego_yaw, ego_shape[0], ego_shape[1], op, ov, obs_yaw, obs_shape[0], obs_shape[1]
+    dv_model = parse_enum(DeltaVModel, delta_v_model, "delta-v model")
+    if dv_model is DeltaVModel.PLANAR_IMPULSE and (ego_shape is None or obs_shape is None):
+        raise ValueError(
+            "collision_harm: the planar impulse model needs ego_shape=(length, width) and "
+            "obs_shape=(length, width) [m]"
         )
-        factor = dv_correction.factor(velocity_angle(ev, ov, ego_yaw, obs_yaw), offset)
-        dv_ego = dv_ego * factor
-        dv_obs = dv_obs * factor
+    ego = _Body(ego_mass, ep, ego_yaw, ego_vel, ego_shape, False)
+    obs = _Body(obs_mass, op, obs_yaw, obs_vel, obs_shape, obs_round)
+    dv_ego, dv_obs = _DELTA_V[dv_model](ego, obs, restitution, impulse_ratio)
     ego_angle, obs_angle = impact_angles(ep[..., 0], ep[..., 1], ego_yaw, op[..., 0], op[..., 1], obs_yaw)
     shape = np.broadcast_shapes(dv_ego.shape, ego_angle.shape, obs_angle.shape, unprotected.shape)
 

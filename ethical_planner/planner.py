@@ -17,7 +17,6 @@ import numpy as np
 
 from ethical_planner.config import PlannerConfig
 from ethical_planner.cost import CostBreakdown, path_deviation, risk_set, total_cost
-from ethical_planner.dv_correction import DeltaVCorrection
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.prediction import Prediction, Predictor, make_predictor
 from ethical_planner.responsibility import LegalCorridors, responsibilities
@@ -241,7 +240,6 @@ class Planner:
         self.ego_mass = float(ego_mass)
         self.predictor = predictor
         self.workers = Workers() if workers is None else workers
-        self.dv_correction = _load_correction(config.risk.delta_v_correction)
         self._previous: PreviousPlan | None = None
         self.desired_speed = (
             config.desired_speed if config.desired_speed is not None else environment.speed_limit
@@ -263,7 +261,6 @@ class Planner:
             self.ego_mass,
             self.environment,
             config.risk,
-            self.dv_correction,
             self.workers,
         )
         timings["risk"] = timings.get("risk", 0.0) + _since(clock)
@@ -541,18 +538,6 @@ class Planner:
             candidate_levels=grid.levels,
             prediction=prediction,
         )
-
-
-def _load_correction(path: str | None) -> DeltaVCorrection | None:
-    """The calibrated delta-v correction named by ``risk.delta_v_correction``, if any."""
-    if path is None:
-        return None
-    try:
-        return DeltaVCorrection.load(path)
-    except OSError as error:
-        raise ValueError(f"risk.delta_v_correction: cannot read {path}: {error.strerror}") from None
-    except ValueError as error:
-        raise ValueError(f"risk.delta_v_correction: {error}") from None
 
 
 def _describe(candidates: Candidates, index: int) -> str:

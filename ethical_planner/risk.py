@@ -14,12 +14,11 @@ import shapely
 
 from ethical_planner.collision_probability import CollisionProbability, collision_probability
 from ethical_planner.config import RiskConfig
-from ethical_planner.dv_correction import DeltaVCorrection
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.geometry import rectangle_corners
 from ethical_planner.harm import HarmModel, boundary_harm, collision_harm
 from ethical_planner.prediction.base import Prediction
-from ethical_planner.road_users import Shape
+from ethical_planner.road_users import RoadUserType, Shape
 from ethical_planner.sampling import Candidates
 from ethical_planner.workers import Workers
 
@@ -162,13 +161,12 @@ def assess_risk(
     ego_mass: float,
     environment: RoadEnvironment,
     config: RiskConfig,
-    dv_correction: DeltaVCorrection | None = None,
     workers: Workers | None = None,
 ) -> RiskAssessment:
     """Collision probability, harm and risk of every candidate for every road user.
 
-    ``dv_correction`` (from ``etp impacts``' calibration) scales the Eq. 1 delta-v of
-    both bodies towards what physical impacts produce before harm is evaluated.
+    Delta-v by ``config.delta_v_model``: paper Eq. 1 or the planar impulse model
+    (``ethical_planner.impulse``), whose contact comes from the two footprints.
     ``workers`` lends its threads and scratch buffers to large problems (a planner
     passes its own; None makes a fresh one for this call).
     """
@@ -199,7 +197,6 @@ def assess_risk(
             p,
             flat,
             ego_shape,
-            dv_correction,
             (harm_obs, harm_ego, risk_obs, risk_ego),
             workers,
         )
@@ -246,7 +243,6 @@ def _harm_and_risk(
     p: np.ndarray,
     flat: np.ndarray,
     ego_shape: Shape,
-    dv_correction: DeltaVCorrection | None,
     out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     workers: Workers,
 ) -> None:
@@ -259,8 +255,7 @@ def _harm_and_risk(
         config: harm models.
         p: collision probabilities, shape (n, k, t).
         flat: flat indices of the triples with p > 0, ascending, shape (m,).
-        ego_shape: the ego's footprint (used by ``dv_correction``).
-        dv_correction: optional calibrated delta-v correction.
+        ego_shape: the ego's footprint (used by the planar delta-v model).
         out: harm_obs, harm_ego (n, k, t) and risk_obs, risk_ego (n, k), zeros, written.
         workers: threads for large problems.
     """
@@ -291,6 +286,7 @@ def _harm_and_risk(
     )
     obs_mass = prediction.mass
     obs_unprotected = prediction.vulnerable
+    obs_round = np.array([t is RoadUserType.PEDESTRIAN for t in prediction.types], dtype=bool)
     model = HarmModel(config.harm_model)
     pedestrian_model = HarmModel(config.pedestrian_model)
     # Chunk boundaries at the start of a (traj, obs) pair, so that each chunk owns the
@@ -324,7 +320,10 @@ def _harm_and_risk(
             obs_unprotected=obs_unprotected.take(obs),
             model=model,
             pedestrian_model=pedestrian_model,
-            dv_correction=dv_correction,
+            delta_v_model=config.delta_v_model,
+            restitution=config.restitution_law,
+            impulse_ratio=config.impulse_ratio,
+            obs_round=obs_round.take(obs),
             ego_shape=(ego_shape.length, ego_shape.width),
             obs_shape=(prediction.length.take(obs), prediction.width.take(obs)),
         )

@@ -1,11 +1,13 @@
-"""Summary figures, plots and the report of an impact table.
+"""Summary, report and figures of an impact table (controlled sweep or closed-loop runs).
 
-Per partner type and impact class (central collinear, oblique, offset): median and
-95th percentile of |relative delta-v error| of Eq. 1, agreement of the geometric
-(centre-direction) impact area with the measured (contact-point) one, and the mean
-absolute difference of the harm from measured and from predicted inputs. Both bodies
-of an impact share one relative delta-v error (one impulse), so the error is taken
-from body a; areas and harms pool both bodies.
+The delta-v error of a model is e = (measured - model) / model, measured = |J| / m over the
+impact sequence; both bodies of an impact share it (one impulse), so it is taken from body
+a. Two models are compared everywhere: paper Eq. 1 and the planar impulse model
+(``ethical_planner.impulse``). Per partner type and impact class (central collinear,
+oblique, offset): median and 95th percentile of |e|, the share of multi-impact sequences,
+agreement of the geometric impact area with the measured one and the harm error
+|H(measured) - H(model)| per body. Sweeps add the held-back evaluation by geometry cell
+(``calibration.held_back_evaluation``) and the speed check.
 """
 
 from __future__ import annotations
@@ -19,12 +21,14 @@ from typing import Any
 import numpy as np
 
 from harm_calibration.calibration import (
-    MIN_DV_MS,
-    CalibrationResult,
-    DeltaVCorrection,
-    calibrate,
+    MIN_IMPACT_DV_MS,
+    REFERENCES,
+    done_checks,
     error_stats,
-    row_offset_fractions,
+    held_back_evaluation,
+    relative_error,
+    scored,
+    speed_independence,
 )
 from harm_calibration.geometry import CLASSES
 from harm_calibration.literature import literature_markdown, literature_table
@@ -32,6 +36,8 @@ from harm_calibration.rows import Row, column
 
 AREAS = ("front", "driver_side", "right_side", "rear")
 MEASURED_STATUS = ("ok", "incomplete")
+#: Delta-v models compared: label -> (delta-v column prefix, harm column prefix).
+DV_MODELS = {"Eq. 1": ("dv_predicted", "harm_predicted"), "planar": ("dv_planar", "harm_planar")}
 
 
 def measured(rows: Sequence[Row]) -> list[Row]:
@@ -48,30 +54,38 @@ def _area_agreement(rows: Sequence[Row]) -> float:
     return float(np.mean([m == p for m, p in pairs])) if pairs else math.nan
 
 
-def _harm_error(rows: Sequence[Row]) -> float:
-    diff = [abs(m - p) for m, p in _body_pairs(rows, "harm") if math.isfinite(m) and math.isfinite(p)]
-    return float(np.mean(diff)) if diff else math.nan
+def dv_errors(rows: Sequence[Row], model: str, reference: str = "sequence") -> np.ndarray:
+    """Relative delta-v error of body a for a model of ``DV_MODELS``, shape (n,).
+
+    Against the measured ``reference`` (``calibration.REFERENCES``); nan for touches
+    (``calibration.scored``).
+    """
+    if not rows:
+        return np.array([])
+    err = relative_error(column(rows, REFERENCES[reference]), column(rows, f"{DV_MODELS[model][0]}_a"))
+    return np.where(scored(rows), err, np.nan)
 
 
-def _dv_error(rows: Sequence[Row]) -> np.ndarray:
-    pred = column(rows, "dv_predicted_a")
-    err = column(rows, "dv_error_a")
-    return np.where(pred > MIN_DV_MS, err, np.nan)
+def harm_errors(rows: Sequence[Row], model: str, side: str) -> np.ndarray:
+    """H(measured) - H(model) of body ``side`` ("a" or "b"), finite entries, shape (k,)."""
+    if not rows:
+        return np.array([])
+    diff = column(rows, f"harm_measured_{side}") - column(rows, f"{DV_MODELS[model][1]}_{side}")
+    return diff[np.isfinite(diff)]
 
 
-def group_stats(rows: Sequence[Row]) -> dict[str, Any]:
-    """Error statistics of a group of measured rows."""
-    stats = error_stats(_dv_error(rows)) if rows else error_stats(np.array([]))
-    err = _dv_error(rows) if rows else np.array([])
-    finite = err[np.isfinite(err)]
-    return {
-        "n": len(rows),
-        "dv_median_abs_rel_error": stats["median_abs"],
-        "dv_p95_abs_rel_error": stats["p95_abs"],
-        "dv_median_rel_error": float(np.median(finite)) if finite.size else math.nan,
-        "area_agreement": _area_agreement(rows),
-        "harm_mean_abs_error": _harm_error(rows),
-    }
+def group_stats(rows: Sequence[Row], reference: str = "sequence") -> dict[str, Any]:
+    """Error statistics of a group of measured rows, per model, against a measured reference."""
+    out: dict[str, Any] = {"n": len(rows)}
+    for model in DV_MODELS:
+        out[model] = error_stats(dv_errors(rows, model, reference))
+        both = np.concatenate([harm_errors(rows, model, "a"), harm_errors(rows, model, "b")])
+        out[model]["harm_mean_abs"] = float(np.mean(np.abs(both))) if both.size else math.nan
+    out["multi_impact_share"] = (
+        float(np.mean([r.get("multi_impact") == "yes" for r in rows])) if rows else math.nan
+    )
+    out["area_agreement"] = _area_agreement(rows)
+    return out
 
 
 def confusion(rows: Sequence[Row]) -> np.ndarray:
@@ -83,25 +97,50 @@ def confusion(rows: Sequence[Row]) -> np.ndarray:
     return matrix
 
 
-def summarize(rows: Sequence[Row], rng: np.random.Generator | None = None) -> dict[str, Any]:
+def harm_by_partner(rows: Sequence[Row]) -> dict[str, Any]:
+    """Harm error per partner type and body (a: the ego, b: the partner), per model."""
+    out: dict[str, Any] = {}
+    for partner in sorted({r["partner"] for r in rows}):
+        in_p = [r for r in rows if r["partner"] == partner]
+        out[partner] = {}
+        for side, body in (("b", "partner"), ("a", "ego")):
+            entry = {}
+            for model in DV_MODELS:
+                diff = harm_errors(in_p, model, side)
+                entry[model] = {
+                    "n": int(diff.size),
+                    "mean_abs": float(np.mean(np.abs(diff))) if diff.size else math.nan,
+                    "p95_abs": float(np.percentile(np.abs(diff), 95)) if diff.size else math.nan,
+                    "mean": float(np.mean(diff)) if diff.size else math.nan,
+                }
+            out[partner][body] = entry
+    return out
+
+
+def summarize(rows: Sequence[Row], seeds: Sequence[int] | None = None) -> dict[str, Any]:
     """Summary of a table of impacts (the content of ``summary.json``).
 
     Args:
         rows: impact rows (any status).
-        rng: generator of the calibration split; no calibration if None or too few rows.
+        seeds: splits of the held-back evaluation (sweep rows with geometry cells only);
+            None skips it.
     """
     good = measured(rows)
     partners = sorted({r["partner"] for r in good})
     classes = [c for c in (*CLASSES, "static") if any(r["class"] == c for r in good)]
-    by_partner = {}
-    for p in partners:
-        in_p = [r for r in good if r["partner"] == p]
-        entry = {"all": group_stats(in_p)}
-        for c in classes:
-            in_pc = [r for r in in_p if r["class"] == c]
-            if in_pc:
-                entry[c] = group_stats(in_pc)
-        by_partner[p] = entry
+
+    def by_partner_table(reference: str) -> dict[str, Any]:
+        table = {}
+        for p in partners:
+            in_p = [r for r in good if r["partner"] == p]
+            entry = {"all": group_stats(in_p, reference)}
+            for c in classes:
+                in_pc = [r for r in in_p if r["class"] == c]
+                if in_pc:
+                    entry[c] = group_stats(in_pc, reference)
+            table[p] = entry
+        return table
+
     status: dict[str, int] = {}
     for r in rows:
         key = r["status"] if r["status"] in (*MEASURED_STATUS, "miss") else "error"
@@ -109,9 +148,14 @@ def summarize(rows: Sequence[Row], rng: np.random.Generator | None = None) -> di
     summary: dict[str, Any] = {
         "n_impacts": len(rows),
         "status": status,
+        "modes": sorted({r.get("mode", "") for r in good}),
+        "restitution_sets": sorted({r.get("restitution_set", "") for r in good}),
         "overall": group_stats(good),
+        "overall_first_impulse": group_stats(good, "first impulse"),
         "by_class": {c: group_stats([r for r in good if r["class"] == c]) for c in classes},
-        "by_partner": by_partner,
+        "by_partner": by_partner_table("sequence"),
+        "by_partner_first_impulse": by_partner_table("first impulse"),
+        "harm_by_partner": harm_by_partner(good),
         "area_confusion": {"areas": list(AREAS), "rows_predicted_cols_measured": confusion(good).tolist()},
         "literature": [
             {
@@ -127,135 +171,232 @@ def summarize(rows: Sequence[Row], rng: np.random.Generator | None = None) -> di
             for c in literature_table()
         ],
     }
-    vehicle = [r for r in good if r["class"] != "static" and math.isfinite(r["angle_deg"])]
-    if rng is not None and len(vehicle) >= 20:
-        result = calibrate(
-            column(vehicle, "dv_predicted_a"),
-            column(vehicle, "dv_measured_a"),
-            column(vehicle, "angle_deg"),
-            row_offset_fractions(vehicle),
-            [r["class"] for r in vehicle],
-            rng,
-        )
-        summary["calibration"] = result.to_dict()
+    swept = [r for r in good if r.get("cell")]
+    if seeds is not None and len({r["cell"] for r in swept}) >= 10:
+        for key, reference in (("held_back", "sequence"), ("held_back_first_impulse", "first impulse")):
+            evaluation = held_back_evaluation(swept, seeds, reference=reference)
+            summary[key] = evaluation
+            summary[f"{key}_checks"] = done_checks(evaluation)
+    if swept:
+        summary["speed_independence"] = speed_independence(swept)
     return summary
 
 
-def _fmt(x: float, pct: bool = False) -> str:
-    if not isinstance(x, float | int) or not math.isfinite(x):
+def _fmt(x: Any, pct: bool = False) -> str:
+    if not isinstance(x, float | int) or isinstance(x, bool) or not math.isfinite(x):
         return "-"
     return f"{100 * x:.1f}%" if pct else f"{x:.3f}"
 
 
-def headline_markdown(summary: dict[str, Any]) -> str:
-    """Markdown table: per partner and class, dv errors, area agreement, harm error."""
+def headline_markdown(summary: dict[str, Any], key: str = "by_partner") -> str:
+    """Markdown table: per partner and class, |dv error| of both models, multi-impact share."""
     lines = [
-        "| partner | class | n | median abs dv error | p95 abs dv error | median signed dv error "
-        "| area agreement | mean abs harm error |",
+        "| partner | class | n | Eq. 1 median | Eq. 1 p95 | planar median | planar p95 | multi-impact |",
         "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
-    for partner, entry in summary["by_partner"].items():
+    for partner, entry in summary[key].items():
         for cls, s in entry.items():
+            e, p = s["Eq. 1"], s["planar"]
             lines.append(
-                f"| {partner} | {cls} | {s['n']} | {_fmt(s['dv_median_abs_rel_error'], True)} | "
-                f"{_fmt(s['dv_p95_abs_rel_error'], True)} | {_fmt(s['dv_median_rel_error'], True)} | "
-                f"{_fmt(s['area_agreement'], True)} | {_fmt(s['harm_mean_abs_error'])} |"
+                f"| {partner} | {cls} | {s['n']} | {_fmt(e['median_abs'], True)} "
+                f"| {_fmt(e['p95_abs'], True)} "
+                f"| {_fmt(p['median_abs'], True)} | {_fmt(p['p95_abs'], True)} "
+                f"| {_fmt(s['multi_impact_share'], True)} |"
             )
     return "\n".join(lines)
 
 
-_CALIBRATION_KEYS = ("test_error_eq1", "test_error_angle_only", "test_error_calibrated")
-_CALIBRATION_NAMES = ("Eq. 1", "angle-only", "angle x offset")
+def _range(stat: dict[str, float]) -> str:
+    return f"{_fmt(stat['median'], True)} ({_fmt(stat['min'], True)}-{_fmt(stat['max'], True)})"
 
 
-def _calibration_markdown(cal: dict[str, Any]) -> str:
-    corr = cal["correction"]
+def held_back_markdown(evaluation: dict[str, Any]) -> str:
+    """Markdown of the held-back evaluation: per group, median and p95 |error| per model."""
     lines = [
-        "Correction (`ethical_planner.dv_correction.DeltaVCorrection`): Eq. 1 delta-v times a "
-        "factor per bin of the angle between the velocity directions and the impact offset "
-        "fraction (perpendicular distance of the partner's centre from the approach line through "
-        "the ego's centre, over the sum of the footprints' half-extents; 0 central, 1 grazing), "
-        "the median of measured / Eq. 1 over the training impacts of the bin. Bins with fewer "
-        f"than {cal.get('min_count', '?')} training impacts take the angle-only factor (or 1). "
-        f"Fitted on {100 * (1 - cal['test_fraction']):.0f}% of the impacts (seed {cal['seed']}); "
-        "errors |(measured - model) / model| on the held-back rest.",
+        f"Measured reference: {evaluation['reference']}. "
+        f"{len(evaluation['seeds'])} splits (seeds {evaluation['seeds'][0]}-{evaluation['seeds'][-1]}), "
+        f"{100 * evaluation['test_fraction']:.0f}% of {evaluation['n_cells']} geometry cells held back each; "
+        "median over the splits (range in brackets) of the median and 95th percentile of |error| on the "
+        "held-back impacts. Correction: Eq. 1 times the median measured / Eq. 1 of the training impacts in "
+        f"the same angle x offset bin (bins with fewer than {evaluation['min_count']} training impacts have "
+        "no factor; their test impacts are counted below, not scored).",
         "",
-        "| class | n test | Eq. 1 median | Eq. 1 p95 | angle-only median | angle-only p95 "
-        "| angle x offset median | angle x offset p95 |",
+        "| group | n test | Eq. 1 median | Eq. 1 p95 | planar median | planar p95 | correction median "
+        "| correction p95 |",
         "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
-    angle_only = cal.get("test_error_angle_only", {})
-    for cls, before in cal["test_error_eq1"].items():
-        mid = angle_only.get(cls, {})
-        after = cal["test_error_calibrated"][cls]
+    for group, models in evaluation["groups"].items():
+        n = models["eq1"]["n"]["median"]
         lines.append(
-            f"| {cls} | {before['n']} | {_fmt(before['median_abs'], True)} | "
-            f"{_fmt(before['p95_abs'], True)} | {_fmt(mid.get('median_abs'), True)} | "
-            f"{_fmt(mid.get('p95_abs'), True)} | "
-            f"{_fmt(after['median_abs'], True)} | {_fmt(after['p95_abs'], True)} |"
+            f"| {group} | {n:.0f} | {_range(models['eq1']['median_abs'])} "
+            f"| {_range(models['eq1']['p95_abs'])} "
+            f"| {_range(models['planar']['median_abs'])} | {_range(models['planar']['p95_abs'])} "
+            f"| {_range(models['correction']['median_abs'])} | {_range(models['correction']['p95_abs'])} |"
         )
-    overall = [cal.get(k, {}).get("all", {}).get("p95_abs_log") for k in _CALIBRATION_KEYS]
+    unseen = evaluation["unseen"]
+    counts = [u["unseen_impacts"] for u in unseen]
+    tests = [u["test_impacts"] for u in unseen]
+    bins = sorted({b for u in unseen for b in u["unseen_bins"]})
     lines += [
         "",
-        "p95 of |ln(measured / model)| (weighs under- and overestimates alike), all classes: "
-        + ", ".join(f"{name} {_fmt(v)}" for name, v in zip(_CALIBRATION_NAMES, overall, strict=True))
-        + ".",
-    ]
-    angle_edges, offset_edges = corr["angle_edges_deg"], corr["offset_edges"]
-    counts = corr["n_train"]
-    header = [f"{offset_edges[j]:g}-{offset_edges[j + 1]:g}" for j in range(len(offset_edges) - 1)]
-    lines += [
+        f"Unseen bins: {min(counts)}-{max(counts)} of {min(tests)}-{max(tests)} held-back impacts per split "
+        f"fell in bins without training impacts ({len(bins)} distinct bins"
+        + (": " + "; ".join(bins[:12]) + (" ..." if len(bins) > 12 else "") if bins else "")
+        + ").",
         "",
-        "Factor (training impacts) per angle bin [deg] (rows) and offset-fraction bin (columns):",
-        "",
-        "| angle \\ offset | " + " | ".join(header) + " |",
-        "| --- |" + " ---: |" * len(header),
+        "Decision: "
+        + (
+            "the correction beats the planar model on held-back cells."
+            if evaluation["decision"]["correction_beats_planar"]
+            else "the correction does not beat the planar model on held-back cells; it is retired."
+        ),
     ]
-    for i, row in enumerate(corr["factors"]):
-        cells = [f"{f:.3f} ({counts[i][j]})" if counts else f"{f:.3f}" for j, f in enumerate(row)]
-        lines.append(f"| {angle_edges[i]:g}-{angle_edges[i + 1]:g} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
-def write_report(out_dir: Path, summary: dict[str, Any], title: str, plots: Sequence[str]) -> Path:
+def done_markdown(checks: Sequence[dict[str, Any]]) -> str:
+    """Markdown of the acceptance checks (planar median <= Eq. 1 / 2, p95 no worse)."""
+    lines = [
+        "| group | Eq. 1 median | planar median | median halved | Eq. 1 p95 | planar p95 | p95 no worse |",
+        "| --- | ---: | ---: | :---: | ---: | ---: | :---: |",
+    ]
+    for c in checks:
+        lines.append(
+            f"| {c['group']} | {_fmt(c['eq1_median'], True)} | {_fmt(c['planar_median'], True)} | "
+            f"{'yes' if c['median_halved'] else 'NO'} | {_fmt(c['eq1_p95'], True)} | "
+            f"{_fmt(c['planar_p95'], True)} | {'yes' if c['p95_no_worse'] else 'NO'} |"
+        )
+    return "\n".join(lines)
+
+
+def harm_markdown(harm: dict[str, Any]) -> str:
+    """Markdown of the harm error per partner and body."""
+    lines = [
+        "| partner | body | n | Eq. 1 mean abs | Eq. 1 p95 abs | planar mean abs | planar p95 abs |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: |",
+    ]
+    for partner, bodies in harm.items():
+        for body, models in bodies.items():
+            e, p = models["Eq. 1"], models["planar"]
+            lines.append(
+                f"| {partner} | {body} | {e['n']} | {_fmt(e['mean_abs'])} | {_fmt(e['p95_abs'])} | "
+                f"{_fmt(p['mean_abs'])} | {_fmt(p['p95_abs'])} |"
+            )
+    return "\n".join(lines)
+
+
+def speed_markdown(check: dict[str, Any]) -> str:
+    """Markdown of the speed check."""
+    lines = [
+        f"Ratio measured / Eq. 1 across closing speeds {check['speeds'][0]:g}-{check['speeds'][1]:g} m/s per "
+        f"geometry cell ({', '.join(check['partners'])}); a cell is flagged at a variation "
+        "(max / min - 1) of "
+        f"{100 * check['limit']:.0f}% or more; 'unexplained' = flagged without a multi-impact sequence.",
+        "",
+        "| restitution | cells | flagged | unexplained | largest variation |",
+        "| --- | ---: | ---: | ---: | ---: |",
+    ]
+    for rset, s in check["by_restitution_set"].items():
+        lines.append(
+            f"| {rset} | {s['n_cells']} | {s['flagged']} | {s['unexplained']} "
+            f"| {_fmt(s['max_variation'], True)} |"
+        )
+    if check["unexplained"]:
+        lines += ["", "Unexplained cells: " + "; ".join(
+            f"{c['cell']} ({c['restitution_set']}): {_fmt(c['variation'], True)}"
+            for c in check["unexplained"][:10]
+        )]  # fmt: skip
+    return "\n".join(lines)
+
+
+def collisions_markdown(rows: Sequence[Row]) -> str:
+    """One line per collision of a batch: measured delta-v and harm against both models."""
+    lines = [
+        "| run | bodies | closing [m/s] | class | dv measured a / b | Eq. 1 a / b | planar a / b "
+        "| harm measured a / b | harm Eq. 1 a / b | harm planar a / b | impulses |",
+        "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+    ]
+
+    def pair(r: Row, key: str, digits: int = 2) -> str:
+        values = [r[f"{key}_{s}"] for s in ("a", "b")]
+        return " / ".join("-" if not math.isfinite(v) else f"{v:.{digits}f}" for v in values)
+
+    for r in rows:
+        lines.append(
+            f"| {r['source']} | {r['type_a']}-{r['type_b']} | {r['closing_speed']:.1f} | {r['class']} | "
+            f"{pair(r, 'dv_measured')} | {pair(r, 'dv_predicted')} | {pair(r, 'dv_planar')} | "
+            f"{pair(r, 'harm_measured', 3)} | {pair(r, 'harm_predicted', 3)} | {pair(r, 'harm_planar', 3)} | "
+            f"{r['n_impulses']:.0f} |"
+        )
+    return "\n".join(lines)
+
+
+def write_report(
+    out_dir: Path, summary: dict[str, Any], title: str, figures: Sequence[str], rows: Sequence[Row] = ()
+) -> Path:
     """Write ``report.md`` from a summary; return its path."""
-    conf = summary["area_confusion"]
-    conf_lines = ["| predicted \\ measured | " + " | ".join(conf["areas"]) + " |", "| --- |" + " ---: |" * 4]
-    for name, row in zip(conf["areas"], conf["rows_predicted_cols_measured"], strict=True):
-        conf_lines.append(f"| {name} | " + " | ".join(str(v) for v in row) + " |")
+    conf = np.array(summary["area_confusion"]["rows_predicted_cols_measured"], dtype=float)
+    share = conf / np.maximum(conf.sum(axis=1, keepdims=True), 1.0)
+    conf_lines = ["| predicted \\ measured | " + " | ".join(AREAS) + " | n |", "| --- |" + " ---: |" * 5]
+    for i, name in enumerate(AREAS):
+        cells = " | ".join(f"{100 * share[i, j]:.0f}%" for j in range(len(AREAS)))
+        conf_lines.append(f"| {name} | {cells} | {int(conf[i].sum())} |")
     o = summary["overall"]
+    f = summary["overall_first_impulse"]
     parts = [
         f"# {title}",
         "",
-        f"{summary['n_impacts']} impacts; status counts: {summary['status']}.",
+        f"{summary['n_impacts']} impacts; status counts: {summary['status']}; contact mode(s): "
+        f"{', '.join(summary['modes'])}; restitution: {', '.join(summary['restitution_sets'])}.",
         "",
-        "Delta-v error = (measured - Eq. 1) / Eq. 1, measured = |contact impulse| / mass. "
-        "Area agreement: reduced area (front / driver side / right side / rear) from the "
-        "direction of the partner's centre (the planner's geometry) against the area of the "
-        "force-weighted contact point, both bodies pooled. Harm error: |H(measured dv, "
-        "measured angle) - H(Eq. 1 dv, geometric angle)| with the planner's models.",
+        "Delta-v error e = (measured - model) / model, measured = |J| / m over the impact sequence "
+        "(from the first contact until the bodies have stayed apart for 0.5 s) or of its first impulse; "
+        "models: paper Eq. 1 (perfectly plastic, common velocity) and the planar impulse model "
+        "(`ethical_planner.impulse`: impulse at the first contact of the footprints, restitution law, "
+        f"Coulomb impulse ratio 0.3). Touches (larger measured delta-v below {MIN_IMPACT_DV_MS} m/s) are "
+        "not scored. Harm error: |H(measured dv, measured angle) - H(model dv, geometric angle)| with the "
+        "planner's harm models.",
         "",
-        f"Overall: median |dv error| {_fmt(o['dv_median_abs_rel_error'], True)}, "
-        f"p95 {_fmt(o['dv_p95_abs_rel_error'], True)}, area agreement {_fmt(o['area_agreement'], True)}, "
-        f"mean |harm error| {_fmt(o['harm_mean_abs_error'])}.",
+        "Overall |dv error| against the whole sequence: Eq. 1 median "
+        f"{_fmt(o['Eq. 1']['median_abs'], True)}, "
+        f"p95 {_fmt(o['Eq. 1']['p95_abs'], True)}; planar median {_fmt(o['planar']['median_abs'], True)}, "
+        f"p95 {_fmt(o['planar']['p95_abs'], True)}. Against the first impulse: Eq. 1 median "
+        f"{_fmt(f['Eq. 1']['median_abs'], True)}, p95 {_fmt(f['Eq. 1']['p95_abs'], True)}; planar median "
+        f"{_fmt(f['planar']['median_abs'], True)}, p95 {_fmt(f['planar']['p95_abs'], True)}. "
+        f"Multi-impact sequences: {_fmt(o['multi_impact_share'], True)}. "
+        f"Impact-area agreement: {_fmt(o['area_agreement'], True)}.",
         "",
-        "## By partner and impact class",
+        "## Delta-v error by partner and impact class (all impacts, whole sequence)",
         "",
         headline_markdown(summary),
         "",
-        "## Impact-area confusion (both bodies)",
+        "## The same against the first impulse",
+        "",
+        headline_markdown(summary, "by_partner_first_impulse"),
+        "",
+    ]
+    for key, name in (("held_back", "whole sequence"), ("held_back_first_impulse", "first impulse")):
+        if key in summary:
+            parts += [
+                f"## Held-back geometry cells ({name})",
+                "",
+                held_back_markdown(summary[key]),
+                "",
+                "Acceptance (held back): planar median at most half of Eq. 1's, planar p95 no worse:",
+                "",
+                done_markdown(summary[f"{key}_checks"]),
+                "",
+            ]
+    parts += ["## Harm error per partner", "", harm_markdown(summary["harm_by_partner"]), ""]
+    if "speed_independence" in summary:
+        parts += ["## Speed independence (vehicles)", "", speed_markdown(summary["speed_independence"]), ""]
+    if rows and not any(r.get("cell") for r in rows):
+        parts += ["## Collisions", "", collisions_markdown(measured(rows)), ""]
+    parts += [
+        "## Impact area: predicted (centre direction) against measured (contact point), both bodies",
         "",
         *conf_lines,
         "",
-    ]
-    if "calibration" in summary:
-        parts += [
-            "## Delta-v calibration (held-back impacts)",
-            "",
-            _calibration_markdown(summary["calibration"]),
-            "",
-        ]
-    parts += [
         "## Literature check",
         "",
         "Car occupants: closing speed between equal-mass cars gives dv = closing / 2; "
@@ -266,8 +407,8 @@ def write_report(out_dir: Path, summary: dict[str, Any], title: str, plots: Sequ
         literature_markdown(literature_table()),
         "",
     ]
-    if plots:
-        parts += ["## Plots", "", *[f"![{p}]({p})" for p in plots], ""]
+    if figures:
+        parts += ["## Figures", "", *[f"![{f}]({f})" for f in figures], ""]
     path = out_dir / "report.md"
     path.write_text("\n".join(parts), encoding="utf-8")
     return path
@@ -290,89 +431,21 @@ def write_summary(out_dir: Path, summary: dict[str, Any]) -> Path:
     return path
 
 
-def write_plots(out_dir: Path, rows: Sequence[Row]) -> list[str]:
-    """Write the PNG plots (matplotlib, Agg backend); return their file names ([] without matplotlib)."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        return []
-    good = [r for r in measured(rows) if math.isfinite(r["angle_deg"])]
-    if not good:
-        return []
-    names = []
-    pred, meas = column(good, "dv_predicted_a"), column(good, "dv_measured_a")
-    pred_b, meas_b = column(good, "dv_predicted_b"), column(good, "dv_measured_b")
-    angle = column(good, "angle_deg")
-
-    fig, ax = plt.subplots(figsize=(6, 5))
-    sc = ax.scatter(
-        np.r_[pred, pred_b], np.r_[meas, meas_b], c=np.r_[angle, angle], cmap="viridis", s=8, vmin=0, vmax=180
-    )
-    top = float(np.nanmax(np.r_[pred, meas, pred_b, meas_b])) * 1.05
-    ax.plot([0, top], [0, top], "k--", lw=0.8)
-    ax.set(xlabel="Eq. 1 delta-v [m/s]", ylabel="measured delta-v [m/s]", title="Delta-v, both bodies")
-    fig.colorbar(sc, ax=ax, label="angle between velocities [deg]")
-    names.append(_save(fig, out_dir, "dv_measured_vs_predicted.png"))
-
-    fig, ax = plt.subplots(figsize=(7, 4))
-    err = _dv_error(good)
-    classes = [r["class"] for r in good]
-    for cls, marker in zip(CLASSES, "o^s", strict=True):
-        mask = np.array([c == cls for c in classes])
-        if mask.any():
-            jitter = (np.arange(mask.sum()) % 7 - 3) * 0.6
-            ax.scatter(angle[mask] + jitter, 100 * err[mask], s=8, marker=marker, label=cls, alpha=0.7)
-    ax.axhline(0, color="k", lw=0.8)
-    ax.set(
-        xlabel="angle between velocities [deg]", ylabel="delta-v error [%]", title="Eq. 1 error against angle"
-    )
-    ax.legend()
-    names.append(_save(fig, out_dir, "dv_error_vs_angle.png"))
-
-    fig, ax = plt.subplots(figsize=(5, 4.5))
-    matrix = confusion(good)
-    ax.imshow(matrix, cmap="Blues")
-    for i in range(len(AREAS)):
-        for j in range(len(AREAS)):
-            ax.text(j, i, str(matrix[i, j]), ha="center", va="center")
-    ax.set_xticks(range(len(AREAS)), AREAS, rotation=30)
-    ax.set_yticks(range(len(AREAS)), AREAS)
-    ax.set(xlabel="measured (contact point)", ylabel="predicted (centre direction)", title="Impact area")
-    names.append(_save(fig, out_dir, "area_confusion.png"))
-
-    fig, ax = plt.subplots(figsize=(6, 4))
-    diff = np.array(
-        [m - p for m, p in _body_pairs(good, "harm") if math.isfinite(m) and math.isfinite(p)], dtype=float
-    )
-    ax.hist(diff, bins=50)
-    ax.set(xlabel="harm(measured) - harm(predicted)", ylabel="bodies", title="Harm error distribution")
-    names.append(_save(fig, out_dir, "harm_error_hist.png"))
-    return names
-
-
-def _save(fig: Any, out_dir: Path, name: str) -> str:
-    fig.tight_layout()
-    fig.savefig(out_dir / name, dpi=110)
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    return name
-
-
 def analyse(
-    out_dir: Path, rows: Sequence[Row], title: str, seed: int = 0, plots: bool = True
+    out_dir: Path,
+    rows: Sequence[Row],
+    title: str,
+    seeds: Sequence[int] = tuple(range(10)),
+    plots: bool = True,
 ) -> dict[str, Any]:
-    """Summary, plots, ``summary.json``, ``report.md`` (and ``calibration.json``) in ``out_dir``."""
-    summary = summarize(rows, np.random.default_rng(seed))
-    if "calibration" in summary:
-        DeltaVCorrection.from_dict(summary["calibration"]["correction"]).save(out_dir / "calibration.json")
-    names = write_plots(out_dir, rows) if plots else []
+    """Summary, figures (PNG and PDF), ``summary.json`` and ``report.md`` in ``out_dir``."""
+    from harm_calibration.figures import write_figures
+
+    summary = summarize(rows, seeds)
+    names = write_figures(out_dir, measured(rows), summary) if plots else []
     write_summary(out_dir, summary)
-    write_report(out_dir, summary, title, names)
+    write_report(out_dir, summary, title, names, rows)
     return summary
 
 
-__all__ = ["CalibrationResult", "analyse", "summarize", "write_report", "write_summary", "write_plots"]
+__all__ = ["analyse", "summarize", "write_report", "write_summary"]

@@ -1,20 +1,24 @@
-"""Fitting the planner's delta-v correction (``ethical_planner.dv_correction``) to impacts.
+"""Held-back evaluation of the delta-v models by geometry cell, and the speed check.
 
-The correction multiplies the perfectly plastic delta-v of Eq. 1 by a factor per bin
-of (angle between the velocity directions, impact offset fraction). The factor of a
-bin is the median of measured / Eq. 1 over the training impacts in it. A bin with
-fewer than ``min_count`` training impacts takes the factor of its whole angle bin
-(the angle-only fit), and an angle bin with too few impacts the factor 1.
+Three predictions of the measured delta-v are compared on impacts a model has not
+seen: paper Eq. 1, the planar impulse model (``ethical_planner.impulse``; nothing is
+fitted) and a *correction* of Eq. 1 fitted to the other impacts, a factor per bin of
+(angle between the velocity directions, impact offset fraction), the median of
+measured / Eq. 1 over the bin's training impacts (the approach of the former
+former ``ethical_planner.dv_correction``, retired because the planar model beats it).
 
-The offset fraction must be the quantity the planner computes from pre-impact states
-(``impact_offset_fraction``, rectangular footprints), not the sweep's design value:
-``row_offset_fractions`` rebuilds each sweep impact's launch states and evaluates the
-planner's function on them. (They agree for rectangular partners; the sweep's round
-pedestrian proxy makes them differ by a few percent for pedestrians.)
+Impacts are split by **geometry cell** (partner, angle, offset; its impacts differ only
+in closing speed), never by row: a random row split puts almost every test impact in a
+cell whose other speeds are in training. Each of ``seeds`` splits holds back
+``test_fraction`` of the cells; the statistics are reported as the median over the
+splits with their range. A bin without ``min_count`` training impacts has no factor: its
+test impacts are reported as *unseen* and left out of the correction's error (never
+silently predicted by Eq. 1).
 
-``calibrate`` splits the impacts with a seeded generator, fits on the training share
-and reports the error of Eq. 1, of the angle-only fit and of the angle-offset fit on
-the held-back impacts.
+``speed_independence`` checks the measurement itself: for a fixed geometry, rigid-body
+mechanics gives a ratio measured / Eq. 1 that does not depend on the closing speed (at
+constant restitution), so a cell whose ratio varies by 10 % or more over the closing
+speeds is listed, with its multi-impact flag.
 """
 
 from __future__ import annotations
@@ -25,287 +29,331 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
 
-from ethical_planner.dv_correction import (
-    DEFAULT_ANGLE_EDGES_DEG,
-    DEFAULT_OFFSET_EDGES,
-    DeltaVCorrection,
-)
-from ethical_planner.geometry import impact_offset_fraction
-from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, RoadUserType
-from harm_calibration.geometry import Footprint, launch_geometry
+from harm_calibration.rows import Row, column
 
-#: Impacts with an Eq. 1 delta-v below this are left out of fits and errors [m/s].
+#: Impacts whose larger measured delta-v (of the two bodies) is below this are touches,
+#: not crashes, and are left out of fits and errors (for every model alike) [m/s].
+MIN_IMPACT_DV_MS = 0.5
+#: Floor of a model's delta-v in the denominator of the relative error [m/s].
 MIN_DV_MS = 0.05
-#: Training impacts a bin needs for its own factor (else the fall-back factor).
-MIN_BIN_COUNT = 5
-#: Offset edges of the angle-only fit (one offset bin).
-ANGLE_ONLY_OFFSET_EDGES = (0.0, 1.0)
-
-
-def _bin_index(edges: Sequence[float], values: np.ndarray) -> np.ndarray:
-    return np.clip(np.searchsorted(np.asarray(edges, float), values, side="right") - 1, 0, len(edges) - 2)
-
-
-def fit_delta_v_correction(
-    dv_predicted: ArrayLike,
-    dv_measured: ArrayLike,
-    angle_deg: ArrayLike,
-    offset_fraction: ArrayLike,
-    angle_edges_deg: Sequence[float] = DEFAULT_ANGLE_EDGES_DEG,
-    offset_edges: Sequence[float] = DEFAULT_OFFSET_EDGES,
-    min_count: int = MIN_BIN_COUNT,
-) -> DeltaVCorrection:
-    """Fit the factor per (angle, offset) bin as the median of measured / Eq. 1 delta-v.
-
-    Impacts with an Eq. 1 delta-v <= ``MIN_DV_MS`` or a non-finite input are ignored.
-
-    Args:
-        dv_predicted: Eq. 1 delta-v [m/s], shape (n,).
-        dv_measured: measured delta-v [m/s], shape (n,).
-        angle_deg: angle between the velocity directions [deg], shape (n,).
-        offset_fraction: impact offset fraction as the planner computes it [-], shape (n,).
-        angle_edges_deg: angle bin edges [deg], 0 to 180.
-        offset_edges: offset bin edges [-], 0 to 1.
-        min_count: training impacts a bin needs for its own median, >= 1. Sparser
-            (angle, offset) bins take their angle bin's median, sparser angle bins 1.
-
-    Returns:
-        The fitted correction, with the training count of every bin in ``n_train``.
-
-    Raises:
-        ValueError: shapes differ or ``min_count`` < 1.
-    """
-    arrays = [np.asarray(x, dtype=float) for x in (dv_predicted, dv_measured, angle_deg, offset_fraction)]
-    if len({a.shape for a in arrays}) != 1:
-        raise ValueError(
-            "shapes differ: dv_predicted, dv_measured, angle_deg, offset_fraction have "
-            f"{[a.shape for a in arrays]}"
-        )
-    if min_count < 1:
-        raise ValueError(f"min_count must be >= 1, got {min_count}")
-    pred, meas, ang, off = arrays
-    keep = np.isfinite(pred) & np.isfinite(meas) & np.isfinite(ang) & np.isfinite(off) & (pred > MIN_DV_MS)
-    ratio = meas[keep] / pred[keep]
-    ia = _bin_index(angle_edges_deg, ang[keep])
-    io = _bin_index(offset_edges, np.clip(off[keep], 0.0, 1.0))
-    n_angle, n_offset = len(angle_edges_deg) - 1, len(offset_edges) - 1
-    factors = np.ones((n_angle, n_offset))
-    counts = np.zeros((n_angle, n_offset), dtype=int)
-    for i in range(n_angle):
-        in_angle = ia == i
-        fallback = float(np.median(ratio[in_angle])) if in_angle.sum() >= min_count else 1.0
-        for j in range(n_offset):
-            r = ratio[in_angle & (io == j)]
-            counts[i, j] = r.size
-            factors[i, j] = float(np.median(r)) if r.size >= min_count else fallback
-    factors = np.where(factors > 0.0, factors, 1.0)  # all-zero measurements: keep Eq. 1
-    return DeltaVCorrection(
-        tuple(float(e) for e in angle_edges_deg),
-        tuple(float(e) for e in offset_edges),
-        tuple(map(tuple, factors)),
-        tuple(map(tuple, counts)),
-    )
+#: Training impacts a bin needs for its own factor.
+MIN_BIN_COUNT = 3
+#: Bin edges of the angle between the velocity directions [deg] (15-deg bins centred on
+#: multiples of 15 deg) and of the offset fraction (bins centred on 0, 0.25, 0.5, 0.75, 1).
+ANGLE_EDGES_DEG = (0.0, 7.5, 22.5, 37.5, 52.5, 67.5, 82.5, 97.5, 112.5, 127.5, 142.5, 157.5, 172.5, 180.0)
+OFFSET_EDGES = (0.0, 0.125, 0.375, 0.625, 0.875, 1.0)
+#: Models compared: name -> column of the predicted delta-v of body a.
+MODELS = {"eq1": "dv_predicted_a", "planar": "dv_planar_a", "correction": ""}
+#: Variation of measured / Eq. 1 across closing speeds that flags a cell.
+SPEED_VARIATION_LIMIT = 0.10
 
 
 def error_stats(relative_error: np.ndarray) -> dict[str, float]:
-    """Error statistics of relative errors e = (measured - model) / model (finite entries only).
+    """Statistics of relative errors e = (measured - model) / model (finite entries only).
 
     Args:
         relative_error: shape (n,).
 
     Returns:
-        ``n``; ``median_abs`` and ``p95_abs``, the median and 95th percentile of |e|;
-        ``p95_abs_log``, the 95th percentile of |ln(measured / model)| = |ln(1 + e)|,
-        which weighs under- and overestimates alike (nan if some e <= -1).
+        ``n``; ``median_abs`` and ``p95_abs`` of |e|; ``median`` (signed).
     """
     e = relative_error[np.isfinite(relative_error)]
     if e.size == 0:
-        return {"n": 0, "median_abs": math.nan, "p95_abs": math.nan, "p95_abs_log": math.nan}
-    log = np.abs(np.log1p(e)) if np.all(e > -1.0) else np.full(e.shape, math.nan)
+        return {"n": 0, "median_abs": math.nan, "p95_abs": math.nan, "median": math.nan}
     return {
         "n": int(e.size),
         "median_abs": float(np.median(np.abs(e))),
         "p95_abs": float(np.percentile(np.abs(e), 95)),
-        "p95_abs_log": float(np.percentile(log, 95)),
+        "median": float(np.median(e)),
     }
+
+
+def relative_error(measured: np.ndarray, model: np.ndarray) -> np.ndarray:
+    """(measured - model) / max(model, ``MIN_DV_MS``); nan where either is not finite."""
+    ok = np.isfinite(model) & np.isfinite(measured)
+    return np.where(ok, (measured - model) / np.maximum(np.where(ok, model, 1.0), MIN_DV_MS), np.nan)
+
+
+def scored(rows: Sequence[Row]) -> np.ndarray:
+    """Impacts that count for delta-v errors: the larger measured delta-v >= ``MIN_IMPACT_DV_MS``."""
+    if not rows:
+        return np.zeros(0, dtype=bool)
+    larger = np.fmax(column(rows, "dv_measured_a"), column(rows, "dv_measured_b"))
+    return np.nan_to_num(larger) >= MIN_IMPACT_DV_MS
+
+
+#: Measured references: name -> column of body a's measured delta-v.
+REFERENCES = {"sequence": "dv_measured_a", "first impulse": "dv_first_a"}
+
+
+def bin_index(angle_deg: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """Flat (angle, offset) bin of each impact, shape (n,)."""
+    ia = np.clip(np.searchsorted(ANGLE_EDGES_DEG, angle_deg, side="right") - 1, 0, len(ANGLE_EDGES_DEG) - 2)
+    io = np.clip(
+        np.searchsorted(OFFSET_EDGES, np.clip(offset, 0, 1), side="right") - 1, 0, len(OFFSET_EDGES) - 2
+    )
+    return ia * (len(OFFSET_EDGES) - 1) + io
+
+
+def bin_label(index: int) -> str:
+    """'angle lo-hi deg, offset lo-hi' of a flat bin index."""
+    n_off = len(OFFSET_EDGES) - 1
+    ia, io = divmod(int(index), n_off)
+    return (
+        f"angle {ANGLE_EDGES_DEG[ia]:g}-{ANGLE_EDGES_DEG[ia + 1]:g} deg, "
+        f"offset {OFFSET_EDGES[io]:g}-{OFFSET_EDGES[io + 1]:g}"
+    )
 
 
 @dataclass(frozen=True, slots=True)
-class CalibrationResult:
-    """A fitted correction and its error on held-back impacts.
-
-    Relative error = (measured - model) / model, for Eq. 1 and for each correction.
+class BinCorrection:
+    """Factor of measured / Eq. 1 per (angle, offset) bin, fitted on training impacts.
 
     Attributes:
-        correction: the (angle, offset) fit on the training impacts.
-        angle_only: the fit with one offset bin (the former angle-only correction), for comparison.
-        seed: seed of the split (-1 if unknown).
-        test_fraction: share of impacts held back.
-        min_count: training impacts a bin needed for its own factor.
-        before: error stats of Eq. 1 on the test impacts (per class and "all").
-        after_angle_only: the same with ``angle_only``.
-        after: the same with ``correction``.
+        factors: per flat bin, nan where the bin is unseen.
+        counts: training impacts per flat bin.
     """
 
-    correction: DeltaVCorrection
-    angle_only: DeltaVCorrection
-    seed: int
-    test_fraction: float
-    min_count: int
-    before: dict[str, dict[str, float]]
-    after_angle_only: dict[str, dict[str, float]]
-    after: dict[str, dict[str, float]]
+    factors: np.ndarray
+    counts: np.ndarray
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-able dict."""
-        return {
-            "correction": self.correction.to_dict(),
-            "angle_only_correction": self.angle_only.to_dict(),
-            "seed": self.seed,
-            "test_fraction": self.test_fraction,
-            "min_count": self.min_count,
-            "test_error_eq1": self.before,
-            "test_error_angle_only": self.after_angle_only,
-            "test_error_calibrated": self.after,
-        }
+    @classmethod
+    def fit(cls, eq1: np.ndarray, measured: np.ndarray, bins: np.ndarray, min_count: int = MIN_BIN_COUNT):
+        """Median of measured / Eq. 1 per bin over impacts with Eq. 1 above ``MIN_DV_MS``."""
+        n_bins = (len(ANGLE_EDGES_DEG) - 1) * (len(OFFSET_EDGES) - 1)
+        ok = np.isfinite(eq1) & np.isfinite(measured) & (eq1 > MIN_DV_MS)
+        factors = np.full(n_bins, np.nan)
+        counts = np.bincount(bins[ok], minlength=n_bins)
+        ratio = measured[ok] / eq1[ok]
+        for b in np.flatnonzero(counts >= min_count):
+            factors[b] = float(np.median(ratio[bins[ok] == b]))
+        return cls(factors, counts)
+
+    def __call__(self, eq1: np.ndarray, bins: np.ndarray) -> np.ndarray:
+        """Corrected delta-v [m/s]; nan in unseen bins."""
+        return eq1 * self.factors[bins]
 
 
-def calibrate(
-    dv_predicted: ArrayLike,
-    dv_measured: ArrayLike,
-    angle_deg: ArrayLike,
-    offset_fraction: ArrayLike,
-    classes: Sequence[str],
-    rng: np.random.Generator,
-    test_fraction: float = 0.3,
-    angle_edges_deg: Sequence[float] = DEFAULT_ANGLE_EDGES_DEG,
-    offset_edges: Sequence[float] = DEFAULT_OFFSET_EDGES,
-    min_count: int = MIN_BIN_COUNT,
-) -> CalibrationResult:
-    """Fit on a random training share, report the error before and after on the rest.
-
-    Args:
-        dv_predicted: Eq. 1 delta-v [m/s], shape (n,).
-        dv_measured: measured delta-v [m/s], shape (n,).
-        angle_deg: angle between velocities [deg], shape (n,).
-        offset_fraction: impact offset fraction as the planner computes it [-], shape (n,).
-        classes: impact class per impact, length n.
-        rng: random generator of the split (pass a seeded one).
-        test_fraction: share held back, in (0, 1).
-        angle_edges_deg: angle bin edges [deg].
-        offset_edges: offset bin edges [-].
-        min_count: training impacts a bin needs for its own factor.
-
-    Returns:
-        Both fits and the held-back error stats; test impacts with Eq. 1 delta-v <=
-        ``MIN_DV_MS`` or a non-finite input are left out of all three.
-    """
-    if not 0.0 < test_fraction < 1.0:
-        raise ValueError(f"test_fraction must lie in (0, 1), got {test_fraction}")
-    pred, meas, ang, off = (
-        np.asarray(x, dtype=float) for x in (dv_predicted, dv_measured, angle_deg, offset_fraction)
-    )
-    cls = np.asarray(classes, dtype=object)
-    if not pred.shape == meas.shape == ang.shape == off.shape == cls.shape:
-        raise ValueError(
-            f"shapes differ: dv_predicted {pred.shape}, dv_measured {meas.shape}, angle_deg {ang.shape}, "
-            f"offset_fraction {off.shape}, classes {cls.shape}"
-        )
-    n = pred.size
-    test = np.zeros(n, dtype=bool)
-    test[rng.permutation(n)[: int(round(test_fraction * n))]] = True
-    train = ~test
-    fit_args = (pred[train], meas[train], ang[train], off[train], angle_edges_deg)
-    correction = fit_delta_v_correction(*fit_args, offset_edges, min_count)
-    angle_only = fit_delta_v_correction(*fit_args, ANGLE_ONLY_OFFSET_EDGES, min_count)
-    valid = test & (pred > MIN_DV_MS) & np.isfinite(meas) & np.isfinite(ang) & np.isfinite(off)
-
-    def rel_error(model: np.ndarray) -> np.ndarray:
-        return (meas - model) / np.where(model > 0, model, np.nan)
-
-    angle_rad = np.radians(ang)
-    errors = {
-        "before": rel_error(pred),
-        "angle_only": rel_error(angle_only(pred, angle_rad, off)),
-        "after": rel_error(correction(pred, angle_rad, off)),
-    }
-    stats: dict[str, dict[str, dict[str, float]]] = {k: {} for k in errors}
-    for name in ["all", *sorted(set(cls[valid]))]:
-        mask = valid if name == "all" else valid & (cls == name)
-        for key, err in errors.items():
-            stats[key][name] = error_stats(err[mask])
-    seed = int(rng.bit_generator.seed_seq.entropy) if hasattr(rng.bit_generator, "seed_seq") else -1
-    return CalibrationResult(
-        correction,
-        angle_only,
-        seed,
-        float(test_fraction),
-        int(min_count),
-        stats["before"],
-        stats["angle_only"],
-        stats["after"],
-    )
-
-
-def _planner_shape(kind: str) -> tuple[float, float]:
-    shape = DEFAULT_SHAPES[RoadUserType(kind)]
-    return shape.length, shape.width
-
-
-def row_offset_fractions(rows: Sequence[dict[str, Any]]) -> np.ndarray:
-    """Impact offset fraction of each row as the planner computes it, shape (n_rows,).
-
-    Sweep rows (``source == "sweep"``) are launched from design values; their launch
-    states are rebuilt with ``geometry.launch_geometry`` (the same call as the sweep,
-    with the rows' speeds) and ``impact_offset_fraction`` is evaluated on them with the
-    planner's rectangular shapes (ego ``EGO_SHAPE``, partner ``DEFAULT_SHAPES``). Other
-    rows (closed-loop runs) keep their ``offset`` column, which ``rows.row_from_impact``
-    computed from the pre-impact states with the same function and the run's body shapes.
-
-    Args:
-        rows: impact rows with the columns of ``rows.COLUMNS``.
-
-    Returns:
-        Offset fractions [-] in [0, 1]; nan where neither is available.
-    """
-    out = np.full(len(rows), math.nan)
-    ego_l, ego_w = EGO_SHAPE.length, EGO_SHAPE.width
-    for k, r in enumerate(rows):
-        design = float(r.get("offset", math.nan))
-        if r.get("source") != "sweep":
-            out[k] = design
-            continue
-        try:
-            length, width = _planner_shape(r["partner"])
-            launch = launch_geometry(
-                Footprint(ego_l, ego_w),
-                Footprint(length, width, r["partner"] == RoadUserType.PEDESTRIAN.value),
-                float(r["speed_a"]),
-                float(r["speed_b"]),
-                math.radians(float(r["angle_deg"])),
-                design,
-            )
-        except (KeyError, ValueError):
-            out[k] = design
-            continue
-        out[k] = impact_offset_fraction(
-            (0.0, 0.0), launch.velocity_a, 0.0, ego_l, ego_w,
-            launch.position_b, launch.velocity_b, launch.yaw_b, length, width,
-        )  # fmt: skip
+def _groups(rows: Sequence[Row]) -> dict[str, np.ndarray]:
+    """Masks of the reporting groups: all, per class, per partner."""
+    classes = np.array([r["class"] for r in rows], dtype=object)
+    partners = np.array([r["partner"] for r in rows], dtype=object)
+    multi = np.array([r.get("multi_impact") == "yes" for r in rows])
+    out = {"all": np.ones(len(rows), dtype=bool)}
+    for c in sorted(set(classes)):
+        out[f"class:{c}"] = classes == c
+    for p in sorted(set(partners)):
+        out[f"partner:{p}"] = partners == p
+    out["sequence:single impulse"] = ~multi
+    out["sequence:multi-impact"] = multi
     return out
 
 
+def held_back_evaluation(
+    rows: Sequence[Row],
+    seeds: Sequence[int] = tuple(range(10)),
+    test_fraction: float = 0.3,
+    reference: str = "sequence",
+) -> dict[str, Any]:
+    """Errors of Eq. 1, the planar model and the fitted correction on held-back cells.
+
+    Args:
+        rows: measured sweep rows with a ``cell`` (others are ignored).
+        seeds: one split per seed (``numpy.random.default_rng(seed)``).
+        test_fraction: share of cells held back, in (0, 1).
+        reference: measured delta-v compared with (``REFERENCES``): the whole impact
+            sequence, or its first impulse (the event a single-impulse model describes).
+
+    Returns:
+        ``groups``: group -> model -> stat -> {"median", "min", "max"} over the splits;
+        ``unseen``: per split, the test impacts in bins without a factor and the bins;
+        ``decision``: whether the correction beats the planar model (median and p95, all).
+
+    Raises:
+        ValueError: fewer than 2 cells, or ``test_fraction`` outside (0, 1).
+    """
+    if not 0.0 < test_fraction < 1.0:
+        raise ValueError(f"test_fraction must lie in (0, 1), got {test_fraction}")
+    if reference not in REFERENCES:
+        raise ValueError(f"reference must be one of {list(REFERENCES)}, got {reference!r}")
+    rows = [r for r in rows if r.get("cell")]
+    rows = [r for r, ok in zip(rows, scored(rows), strict=True) if ok]
+    cells = np.array([r["cell"] for r in rows], dtype=object)
+    unique = np.array(sorted(set(cells)), dtype=object)
+    if unique.size < 2:
+        raise ValueError(f"held-back evaluation needs >= 2 geometry cells, got {unique.size}")
+    measured = column(rows, REFERENCES[reference])
+    eq1 = column(rows, "dv_predicted_a")
+    planar = column(rows, "dv_planar_a")
+    bins = bin_index(column(rows, "angle_deg"), column(rows, "offset"))
+    groups = _groups(rows)
+    per_split: dict[str, dict[str, dict[str, list[float]]]] = {
+        g: {m: {"median_abs": [], "p95_abs": [], "n": []} for m in MODELS} for g in groups
+    }
+    unseen = []
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        n_test = max(1, int(round(test_fraction * unique.size)))
+        test_cells = set(rng.permutation(unique)[:n_test])
+        test = np.array([c in test_cells for c in cells])
+        correction = BinCorrection.fit(eq1[~test], measured[~test], bins[~test])
+        corrected = correction(eq1, bins)
+        missing = test & ~np.isfinite(corrected)
+        unseen.append(
+            {
+                "seed": int(seed),
+                "test_impacts": int(test.sum()),
+                "unseen_impacts": int(missing.sum()),
+                "unseen_bins": [bin_label(b) for b in sorted(set(bins[missing].tolist()))],
+            }
+        )
+        errors = {
+            "eq1": relative_error(measured, eq1),
+            "planar": relative_error(measured, planar),
+            "correction": relative_error(measured, corrected),
+        }
+        for g, mask in groups.items():
+            for m, err in errors.items():
+                stats = error_stats(err[test & mask])
+                for key in ("median_abs", "p95_abs", "n"):
+                    per_split[g][m][key].append(stats[key])
+    summary: dict[str, Any] = {}
+    for g, models in per_split.items():
+        summary[g] = {}
+        for m, stats in models.items():
+            summary[g][m] = {}
+            for key, values in stats.items():
+                array = np.array(values, dtype=float)
+                finite = array[np.isfinite(array)]
+                summary[g][m][key] = {
+                    "median": float(np.median(finite)) if finite.size else math.nan,
+                    "min": float(finite.min()) if finite.size else math.nan,
+                    "max": float(finite.max()) if finite.size else math.nan,
+                }
+    overall = summary["all"]
+    keep = all(
+        overall["correction"][k]["median"] < overall["planar"][k]["median"] for k in ("median_abs", "p95_abs")
+    )
+    return {
+        "reference": reference,
+        "seeds": [int(s) for s in seeds],
+        "test_fraction": float(test_fraction),
+        "n_cells": int(unique.size),
+        "min_count": MIN_BIN_COUNT,
+        "groups": summary,
+        "unseen": unseen,
+        "decision": {
+            "correction_beats_planar": bool(keep),
+            "rule": "the correction is kept only if its held-back median and p95 |error| "
+            "(medians over the splits) are both below the planar model's",
+        },
+    }
+
+
+def done_checks(evaluation: dict[str, Any]) -> list[dict[str, Any]]:
+    """Per group: planar median <= half of Eq. 1's and planar p95 <= Eq. 1's (held back)."""
+    out = []
+    for group, models in evaluation["groups"].items():
+        eq1, planar = models["eq1"], models["planar"]
+        m_eq1, m_pl = eq1["median_abs"]["median"], planar["median_abs"]["median"]
+        p_eq1, p_pl = eq1["p95_abs"]["median"], planar["p95_abs"]["median"]
+        if not all(math.isfinite(x) for x in (m_eq1, m_pl, p_eq1, p_pl)):
+            continue
+        out.append(
+            {
+                "group": group,
+                "eq1_median": m_eq1,
+                "planar_median": m_pl,
+                "eq1_p95": p_eq1,
+                "planar_p95": p_pl,
+                "median_halved": bool(m_pl <= 0.5 * m_eq1),
+                "p95_no_worse": bool(p_pl <= p_eq1),
+            }
+        )
+    return out
+
+
+def speed_independence(
+    rows: Sequence[Row],
+    partners: Sequence[str] = ("car", "truck", "bus"),
+    speeds: tuple[float, float] = (5.0, 30.0),
+    limit: float = SPEED_VARIATION_LIMIT,
+) -> dict[str, Any]:
+    """Variation of measured / Eq. 1 across closing speeds, per geometry cell.
+
+    Args:
+        rows: measured sweep rows (with ``cell`` and ``closing_speed``).
+        partners: partner types checked.
+        speeds: closing-speed range [m/s] (inclusive).
+        limit: variation (max / min - 1) that flags a cell.
+
+    Returns:
+        ``n_cells``, ``flagged`` (cells at or over the limit), ``unexplained`` (flagged
+        without any multi-impact or multi-body impact), the largest variation, and per
+        restitution setting the same counts.
+    """
+    by_cell: dict[tuple[str, str], list[Row]] = {}
+    for r in rows:
+        if r.get("cell") and r["partner"] in partners and speeds[0] <= r["closing_speed"] <= speeds[1]:
+            by_cell.setdefault((r["restitution_set"], r["cell"]), []).append(r)
+    cells = []
+    for (rset, cell), group in sorted(by_cell.items()):
+        if len(group) < 2:
+            continue
+        ratio = column(group, "dv_measured_a") / column(group, "dv_predicted_a")
+        ratio = ratio[np.isfinite(ratio) & (ratio > 0)]
+        if ratio.size < 2:
+            continue
+        variation = float(ratio.max() / ratio.min() - 1.0)
+        multi = any(r.get("multi_impact") == "yes" for r in group)
+        cells.append(
+            {
+                "restitution_set": rset,
+                "cell": cell,
+                "variation": variation,
+                "multi_impact": multi,
+                "ratio_min": float(ratio.min()),
+                "ratio_max": float(ratio.max()),
+            }  # fmt: skip
+        )
+    flagged = [c for c in cells if c["variation"] >= limit]
+    unexplained = [c for c in flagged if not c["multi_impact"]]
+    per_set = {}
+    for rset in sorted({c["restitution_set"] for c in cells}):
+        in_set = [c for c in cells if c["restitution_set"] == rset]
+        per_set[rset] = {
+            "n_cells": len(in_set),
+            "flagged": sum(c["variation"] >= limit for c in in_set),
+            "unexplained": sum(c["variation"] >= limit and not c["multi_impact"] for c in in_set),
+            "max_variation": max((c["variation"] for c in in_set), default=math.nan),
+        }
+    return {
+        "limit": limit,
+        "speeds": list(speeds),
+        "partners": list(partners),
+        "n_cells": len(cells),
+        "flagged": flagged,
+        "unexplained": unexplained,
+        "max_variation": max((c["variation"] for c in cells), default=math.nan),
+        "by_restitution_set": per_set,
+    }
+
+
 __all__ = [
-    "DEFAULT_ANGLE_EDGES_DEG",
-    "DEFAULT_OFFSET_EDGES",
+    "ANGLE_EDGES_DEG",
     "MIN_BIN_COUNT",
     "MIN_DV_MS",
-    "CalibrationResult",
-    "DeltaVCorrection",
-    "calibrate",
+    "MIN_IMPACT_DV_MS",
+    "MODELS",
+    "REFERENCES",
+    "OFFSET_EDGES",
+    "BinCorrection",
+    "bin_index",
+    "done_checks",
     "error_stats",
-    "fit_delta_v_correction",
-    "row_offset_fractions",
+    "held_back_evaluation",
+    "relative_error",
+    "scored",
+    "speed_independence",
 ]

@@ -24,21 +24,26 @@ from mujoco_world.loop.summary import BodyRecord
 #: Identification and design columns (sweep design values; derived for runs).
 KEY_COLUMNS = (
     "id", "source", "partner", "closing_speed", "angle_deg", "offset", "restitution_set",
-    "class", "status",
+    "mode", "cell", "class", "status",
 )  # fmt: skip
 _BODY_FIELDS = (
-    "type", "mass", "speed", "dv_measured", "dv_com", "dv_predicted", "dv_error",
-    "area_measured", "area_predicted", "clock_measured", "clock_predicted",
-    "model", "harm_measured", "harm_predicted",
+    "type", "mass", "speed", "dv_measured", "dv_first", "dv_com", "dv_predicted", "dv_error",
+    "dv_planar", "dv_error_planar", "area_measured", "area_predicted", "clock_measured",
+    "clock_predicted", "model", "harm_measured", "harm_predicted", "harm_planar",
+)  # fmt: skip
+_MEASUREMENT_FIELDS = (
+    "restitution", "duration", "peak_force", "peak_time", "max_penetration", "n_impulses",
+    "first_impulse_share",
 )  # fmt: skip
 #: Every column of ``impacts.csv``, in order.
 COLUMNS = (
     KEY_COLUMNS
     + tuple(f"{f}_{s}" for s in ("a", "b") for f in _BODY_FIELDS)
-    + ("restitution", "duration", "peak_force", "max_penetration")
+    + _MEASUREMENT_FIELDS
+    + ("multi_impact",)
 )
 _TEXT = frozenset(
-    {"id", "source", "partner", "restitution_set", "class", "status"}
+    {"id", "source", "partner", "restitution_set", "mode", "cell", "class", "status", "multi_impact"}
     | {f"{f}_{s}" for s in ("a", "b") for f in ("type", "area_measured", "area_predicted", "model")}
 )
 
@@ -81,15 +86,19 @@ def row_from_impact(
         row[f"mass_{side}"] = _num(body.mass)
         row[f"speed_{side}"] = float(np.hypot(*body.velocity))
         for field in (
-            "dv_measured", "dv_com", "dv_predicted", "dv_error", "clock_measured", "clock_predicted",
-            "harm_measured", "harm_predicted",
+            "dv_measured", "dv_first", "dv_com", "dv_predicted", "dv_error", "dv_planar",
+            "dv_error_planar", "clock_measured", "clock_predicted", "harm_measured",
+            "harm_predicted", "harm_planar",
         ):  # fmt: skip
             row[f"{field}_{side}"] = _num(getattr(c, field))
         row[f"area_measured_{side}"] = c.area_measured or ""
         row[f"area_predicted_{side}"] = c.area_predicted or ""
         row[f"model_{side}"] = c.model or ""
-    for field in ("restitution", "duration", "peak_force", "max_penetration"):
+    for field in ("restitution", "duration", "peak_force", "peak_time", "max_penetration"):
         row[field] = _num(getattr(meas, field))
+    row["n_impulses"] = float(meas.n_impulses)
+    row["first_impulse_share"] = meas.first_impulse_share if meas.impulses else math.nan
+    row["multi_impact"] = "yes" if meas.multi_impact else "no"
     row["status"] = "ok" if meas.complete else "incomplete"
     row["source"] = source
     if design is not None:
@@ -102,6 +111,8 @@ def row_from_impact(
     row["id"] = f"{source}#{meas.time:.3f}:{a.name}-{b.name}"
     row["closing_speed"] = float(np.hypot(*rel_vel))
     row["restitution_set"] = "run"
+    row["mode"] = "run"
+    row["cell"] = ""
     if b.is_static:
         row["partner"] = b.type or STATIC
         row["class"] = STATIC

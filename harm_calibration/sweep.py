@@ -2,8 +2,12 @@
 
 Body a is the default ego (BMW 320i, 1475 kg); body b is a partner of each type.
 Every ``ImpactCase`` is launched with ``mujoco_world.impact.ImpactRig`` (one compiled
-rig per partner and restitution setting and process), compared with the planner's
-model by ``mujoco_world.compare.compare_impact`` and flattened into a row.
+rig per partner, restitution setting and contact mode and process), compared with the
+planner's models (Eq. 1 and the planar impulse model, the latter with the restitution
+the world used) by ``mujoco_world.compare.compare_impact`` and flattened into a row.
+
+A *geometry cell* is a partner, an angle and an offset; its impacts differ only in
+closing speed. Held-back evaluations split by cell (``harm_calibration.calibration``).
 
 The full grid runs on a spawn-safe process pool and is resumable: cases whose id is
 already in ``impacts.csv`` are skipped and new rows are appended as they finish.
@@ -20,20 +24,22 @@ from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 
+from ethical_planner.impulse import RestitutionLaw
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUserType
 from harm_calibration.geometry import Footprint, classify, launch_geometry, speeds_for_closing
 from harm_calibration.rows import COLUMNS, Row, read_rows, row_from_impact, write_rows
 from mujoco_world.evaluation.compare import compare_impact
 from mujoco_world.physics.impact import ImpactRig
 from mujoco_world.physics.scene import BodyProxy
-from mujoco_world.scenario.spec import ContactSpec, RestitutionSpec
+from mujoco_world.scenario.spec import ContactMode, ContactSpec
 
 #: Partner types of the sweep (car-cyclist is the bicycle type).
 PARTNERS = ("car", "truck", "bus", "motorcycle", "bicycle", "pedestrian")
 #: Largest partner speed [m/s]; vehicles drive at half the closing speed.
 PARTNER_SPEED_CAP = {"pedestrian": 2.0, "bicycle": 6.0, "motorcycle": 20.0}
-#: Restitution settings: name -> coefficient (None: the world's near-plastic default, e ~ 0.01).
-RESTITUTION_SETS: dict[str, float | None] = {"plastic": None, "e0.1": 0.1, "e0.2": 0.2, "e0.4": 0.4}
+#: Restitution settings: name -> constant coefficient (None: the world's default law,
+#: which is also the planner's default).
+RESTITUTION_SETS: dict[str, float | None] = {"default": None, "e0.1": 0.1, "e0.2": 0.2, "e0.4": 0.4}
 
 
 class Grid(StrEnum):
@@ -41,6 +47,7 @@ class Grid(StrEnum):
 
     SMALL = "small"
     FULL = "full"
+    SPEED = "speed"
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,6 +58,7 @@ class GridSpec:
         closing_speeds: relative speeds [m/s]. angles_deg: angles between the velocity
         directions [deg]. offsets: lateral offsets as a fraction of the edge offset.
         partners: partner types. restitution_sets: keys of ``RESTITUTION_SETS``.
+        mode: contact mode of the world (``rigid`` for validation).
     """
 
     closing_speeds: tuple[float, ...]
@@ -58,6 +66,7 @@ class GridSpec:
     offsets: tuple[float, ...]
     partners: tuple[str, ...]
     restitution_sets: tuple[str, ...]
+    mode: ContactMode = ContactMode.RIGID
 
     def __post_init__(self) -> None:
         for name in ("closing_speeds", "angles_deg", "offsets", "partners", "restitution_sets"):
@@ -75,31 +84,50 @@ class GridSpec:
         bad = [r for r in self.restitution_sets if r not in RESTITUTION_SETS]
         if bad:
             raise ValueError(f"GridSpec.restitution_sets: unknown {bad}; allowed: {tuple(RESTITUTION_SETS)}")
+        try:
+            object.__setattr__(self, "mode", ContactMode(self.mode))
+        except ValueError:
+            allowed = ", ".join(m.value for m in ContactMode)
+            raise ValueError(f"GridSpec.mode: unknown {self.mode!r}; allowed: {allowed}") from None
 
     def cases(self) -> list[ImpactCase]:
         """Every case of the grid, in a fixed order."""
         return [
-            ImpactCase(p, c, a, o, r)
+            ImpactCase(p, c, a, o, r, self.mode)
             for r, p, c, a, o in itertools.product(
                 self.restitution_sets, self.partners, self.closing_speeds, self.angles_deg, self.offsets
             )
         ]
 
 
+#: Closing speeds [m/s], angles [deg] and offsets of the full and speed grids: every
+#: angle x offset bin of ``calibration.ANGLE_EDGES_DEG`` x ``OFFSET_EDGES`` holds one value.
+_FULL_SPEEDS = (5.0, 7.5, 10.0, 15.0, 20.0, 25.0, 30.0)
+_FULL_ANGLES = tuple(float(a) for a in range(0, 181, 15))
+_FULL_OFFSETS = (0.0, 0.25, 0.5, 0.75, 0.9)
+
 GRIDS = {
     Grid.SMALL: GridSpec(
-        closing_speeds=(3.0, 10.0, 20.0, 30.0),
+        closing_speeds=(5.0, 10.0, 20.0, 30.0),
         angles_deg=(0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0),
         offsets=(0.0, 0.5),
         partners=PARTNERS,
-        restitution_sets=("plastic", "e0.2"),
+        restitution_sets=("default",),
     ),
     Grid.FULL: GridSpec(
-        closing_speeds=tuple(float(v) for v in range(2, 31, 2)),
-        angles_deg=tuple(float(a) for a in range(0, 181, 15)),
-        offsets=(0.0, 0.25, 0.5, 0.75),
+        closing_speeds=_FULL_SPEEDS,
+        angles_deg=_FULL_ANGLES,
+        offsets=_FULL_OFFSETS,
         partners=PARTNERS,
-        restitution_sets=tuple(RESTITUTION_SETS),
+        restitution_sets=("default",),
+    ),
+    # Speed independence of the measurement: constant restitution, vehicles only.
+    Grid.SPEED: GridSpec(
+        closing_speeds=_FULL_SPEEDS,
+        angles_deg=_FULL_ANGLES,
+        offsets=_FULL_OFFSETS,
+        partners=("car", "truck", "bus"),
+        restitution_sets=("e0.1",),
     ),
 }
 
@@ -112,7 +140,7 @@ class ImpactCase:
         partner: type of body b. closing_speed: |v_a - v_b| [m/s].
         angle_deg: angle between the velocity directions [deg], 0 rear-end, 180 head-on.
         offset: lateral offset, fraction of the edge offset. restitution_set: key of
-        ``RESTITUTION_SETS``.
+        ``RESTITUTION_SETS``. mode: contact mode.
     """
 
     partner: str
@@ -120,14 +148,20 @@ class ImpactCase:
     angle_deg: float
     offset: float
     restitution_set: str
+    mode: ContactMode = ContactMode.RIGID
 
     @property
     def id(self) -> str:
         """Stable identifier (the resume key in ``impacts.csv``)."""
         return (
             f"{self.partner}|v{self.closing_speed:g}|a{self.angle_deg:g}|o{self.offset:g}"
-            f"|{self.restitution_set}"
+            f"|{self.restitution_set}|{ContactMode(self.mode).value}"
         )
+
+    @property
+    def cell(self) -> str:
+        """Geometry cell: partner, angle and offset (all closing speeds share it)."""
+        return f"{self.partner}|a{self.angle_deg:g}|o{self.offset:g}"
 
     def design(self) -> dict[str, object]:
         """Design columns of the row."""
@@ -139,6 +173,8 @@ class ImpactCase:
             "offset": float(self.offset),
             "restitution_set": self.restitution_set,
             "class": classify(self.angle_deg, self.offset),
+            "cell": self.cell,
+            "mode": ContactMode(self.mode).value,
         }
 
 
@@ -147,19 +183,22 @@ def ego_proxy() -> BodyProxy:
     return BodyProxy("ego", RoadUserType.CAR, EGO_SHAPE.length, EGO_SHAPE.width, EGO_MASS_KG)
 
 
-def contact_for(partner: str, restitution_set: str) -> ContactSpec:
-    """Contact model of a restitution setting between the ego (car) and ``partner``."""
+def restitution_for(restitution_set: str) -> RestitutionLaw:
+    """Restitution law of a setting (the default law, or a constant)."""
     e = RESTITUTION_SETS[restitution_set]
-    if e is None:
-        return ContactSpec()
-    return ContactSpec(restitution=(RestitutionSpec(RoadUserType.CAR, RoadUserType(partner), e),))
+    return ContactSpec().restitution_law if e is None else RestitutionLaw.constant(e)
+
+
+def contact_for(restitution_set: str, mode: ContactMode | str = ContactMode.RIGID) -> ContactSpec:
+    """Contact model of a restitution setting in a contact mode."""
+    return ContactSpec(mode=ContactMode(mode), restitution_law=restitution_for(restitution_set))
 
 
 @functools.lru_cache(maxsize=32)
-def _rig(partner: str, restitution_set: str) -> ImpactRig:
-    """Rig of this process for a partner and restitution setting (compiled once)."""
+def _rig(partner: str, restitution_set: str, mode: str) -> ImpactRig:
+    """Rig of this process for a partner, restitution setting and mode (compiled once)."""
     return ImpactRig(
-        ego_proxy(), BodyProxy.of_type("partner", partner), contact=contact_for(partner, restitution_set)
+        ego_proxy(), BodyProxy.of_type("partner", partner), contact=contact_for(restitution_set, mode)
     )
 
 
@@ -179,11 +218,11 @@ def run_case(case: ImpactCase) -> Row:
             alpha,
             case.offset,
         )
-        rig = _rig(case.partner, case.restitution_set)
+        rig = _rig(case.partner, case.restitution_set, ContactMode(case.mode).value)
         measurement = rig.launch(
             KinematicState(0.0, 0.0, 0.0, speed_a),
             KinematicState(launch.position_b[0], launch.position_b[1], launch.yaw_b, speed_b),
-            max_time=launch.time_to_contact + 1.5,
+            max_time=launch.time_to_contact + 4.0,
             velocity_a=launch.velocity_a,
             velocity_b=launch.velocity_b,
         )
@@ -195,7 +234,8 @@ def run_case(case: ImpactCase) -> Row:
         row = {c: math.nan for c in COLUMNS} | design
         row.update(source="sweep", status="miss")
         return row
-    return row_from_impact(compare_impact(measurement), source="sweep", design=design)
+    record = compare_impact(measurement, restitution=restitution_for(case.restitution_set))
+    return row_from_impact(record, source="sweep", design=design)
 
 
 def run_sweep(
@@ -239,7 +279,7 @@ def _map(cases: Sequence[ImpactCase], workers: int) -> Iterable[Row]:
         yield from map(run_case, cases)
         return
     # Group by rig so each process compiles few models; chunks keep the bar moving.
-    ordered = sorted(cases, key=lambda c: (c.restitution_set, c.partner))
+    ordered = sorted(cases, key=lambda c: (c.restitution_set, c.mode, c.partner))
     context = multiprocessing.get_context("spawn")
     with context.Pool(workers) as pool:
         yield from pool.imap_unordered(run_case, ordered, chunksize=16)

@@ -111,8 +111,7 @@ def add_config(parser: argparse.ArgumentParser) -> None:
         type=Path,
         default=None,
         metavar="FILE.toml",
-        help="planner TOML: overrides applied on top of each planner preset (see the README); "
-        "relative paths in it are relative to the file",
+        help="planner TOML: overrides applied on top of each planner preset (see the README)",
     )
 
 
@@ -124,8 +123,6 @@ def planner_configs(names: Sequence[str], config: Path | None) -> list:
     each preset gets the file's
     overrides and is named ``<preset>+<file stem>`` unless the file sets ``name`` (a
     file's ``preset`` key is allowed when one planner is asked for and chooses it).
-    A ``risk.delta_v_correction`` path is resolved against the file's folder and
-    loaded once here, so that a bad calibration file fails before any simulation.
 
     Raises:
         ValueError: an unknown preset, or a config file that cannot be read or holds
@@ -134,7 +131,6 @@ def planner_configs(names: Sequence[str], config: Path | None) -> list:
     import dataclasses
 
     from ethical_planner.config import PRESETS, load_config, preset
-    from ethical_planner.dv_correction import DeltaVCorrection
     from ethical_planner.records import read_toml
     from mujoco_world.agents import EGO_PLANNERS
 
@@ -158,16 +154,6 @@ def planner_configs(names: Sequence[str], config: Path | None) -> list:
             loaded = dataclasses.replace(loaded, name=f"{loaded.name}+{Path(config).stem}")
         _check_planner_name(loaded.name, config)
         configs.append(loaded)
-    path = configs[0].risk.delta_v_correction
-    if path is not None:
-        try:
-            DeltaVCorrection.load(path)
-        except OSError as error:
-            raise ValueError(
-                f"--config {config}: risk.delta_v_correction: cannot read {path}: {error.strerror}"
-            ) from None
-        except ValueError as error:
-            raise ValueError(f"--config {config}: risk.delta_v_correction: {error}") from None
     return configs
 
 

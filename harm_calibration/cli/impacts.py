@@ -1,6 +1,6 @@
 """Subcommands of the ``harm_calibration`` layer (impact sweeps, calibration, refit).
 
-``etp impacts --grid small|full --out DIR``: controlled impact sweep, resumable.
+``etp impacts --grid small|full|speed [--contact rigid] --out DIR``: controlled impact sweep, resumable.
 ``etp impacts --from-runs RUNS --out DIR``: the same comparison over run collisions.
 ``etp refit-harm FILE.csv [--model reduced_sym] [--json]``: logistic refit of crash
 records or of an ``impacts.csv``.
@@ -23,18 +23,32 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "impacts",
         help="measure impacts in MuJoCo and compare them with the harm model",
         description="Controlled impact sweep (--grid) or closed-loop collisions (--from-runs): "
-        "measured vs Eq. 1 delta-v, impact areas, harm; writes impacts.csv, summary.json, "
-        "report.md, calibration.json and PNG plots to --out.",
+        "measured delta-v against paper Eq. 1 and the planar impulse model, impact areas, harm; "
+        "held-back evaluation by geometry cell; writes impacts.csv, summary.json, report.md and "
+        "figures (PNG and PDF) to --out.",
     )
     source = impacts.add_mutually_exclusive_group()
-    source.add_argument("--grid", choices=["small", "full"], default=None, help="sweep grid (default small)")
+    source.add_argument(
+        "--grid", choices=["small", "full", "speed"], default=None, help="sweep grid (default small)"
+    )
     source.add_argument(
         "--from-runs", type=Path, default=None, metavar="DIR", help="folder of etp run/demo output"
     )
+    source.add_argument(
+        "--pulses",
+        action="store_true",
+        help="crash pulses of the crush and rigid modes (car into a wall at 56 km/h, ...): "
+        "pulses.md and crash_pulses.png/pdf",
+    )
     impacts.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     impacts.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), help="processes")
-    impacts.add_argument("--seed", type=int, default=0, help="seed of the calibration train/test split")
-    impacts.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    impacts.add_argument(
+        "--contact", choices=["rigid", "crush", "soft"], default="rigid", help="contact mode of the sweep"
+    )
+    impacts.add_argument(
+        "--seeds", type=int, default=10, help="held-back splits by geometry cell (seeds 0..N-1, default 10)"
+    )
+    impacts.add_argument("--no-plots", action="store_true", help="skip the figures")
     impacts.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_json(impacts)
     impacts.set_defaults(handler=_impacts)
@@ -68,6 +82,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _impacts(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from harm_calibration.analysis import analyse, headline_markdown
     from harm_calibration.closed_loop import rows_from_runs
     from harm_calibration.rows import write_rows
@@ -76,9 +92,25 @@ def _impacts(args: argparse.Namespace) -> int:
     out = output_dir(args.out)
     if args.from_runs is not None and not Path(args.from_runs).is_dir():
         raise ValueError(f"--from-runs {args.from_runs}: no such folder")
+    if args.seeds < 1:
+        raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
     if args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
     start = time.perf_counter()
+    if args.pulses:
+        from harm_calibration.pulses import crash_pulses, pulse_table, write_pulse_figure
+
+        pulses = crash_pulses()
+        table = pulse_table(pulses)
+        figure = [] if args.no_plots else [write_pulse_figure(out, pulses)]
+        text = "# Crash pulses\n\n" + table + "\n" + "".join(f"\n![{f}]({f})\n" for f in figure)
+        (out / "pulses.md").write_text(text, encoding="utf-8")
+        if args.json:
+            print_json({"pulses": [p.summary() for p in pulses], "figures": figure})
+            return 0
+        print(table)
+        print(f"{len(pulses)} pulses in {time.perf_counter() - start:.1f} s; {out / 'pulses.md'}")
+        return 0
     if args.from_runs is not None:
         rows = rows_from_runs(args.from_runs)
         if not rows:
@@ -87,20 +119,24 @@ def _impacts(args: argparse.Namespace) -> int:
         title = f"Closed-loop impacts from {args.from_runs}"
     else:
         grid = Grid(args.grid or "small")
-        rows = run_sweep(GRIDS[grid].cases(), out / "impacts.csv", args.workers, progress=show_progress(args))
-        title = f"Impact sweep, {grid.value} grid"
-    summary = analyse(out, rows, title, seed=args.seed, plots=not args.no_plots)
+        spec = dataclasses.replace(GRIDS[grid], mode=args.contact)
+        rows = run_sweep(spec.cases(), out / "impacts.csv", args.workers, progress=show_progress(args))
+        title = f"Impact sweep, {grid.value} grid, {args.contact} contact"
+    summary = analyse(out, rows, title, seeds=tuple(range(args.seeds)), plots=not args.no_plots)
     if args.json:
         print_json(summary)
         return 0
     print(headline_markdown(summary))
-    if "calibration" in summary:
-        before = summary["calibration"]["test_error_eq1"]["all"]
-        after = summary["calibration"]["test_error_calibrated"]["all"]
+    held = summary.get("held_back")
+    if held is not None:
+        overall = held["groups"]["all"]
         print(
-            f"calibration (test set): median |dv error| {before['median_abs']:.1%} -> "
-            f"{after['median_abs']:.1%}, "
-            f"p95 {before['p95_abs']:.1%} -> {after['p95_abs']:.1%}"
+            "held-back cells (median over splits): |dv error| median "
+            + ", ".join(
+                f"{m} {overall[m]['median_abs']['median']:.1%}" for m in ("eq1", "planar", "correction")
+            )
+            + "; p95 "
+            + ", ".join(f"{m} {overall[m]['p95_abs']['median']:.1%}" for m in ("eq1", "planar", "correction"))
         )
     print(f"{len(rows)} impacts in {time.perf_counter() - start:.1f} s; report: {out / 'report.md'}")
     return 0

@@ -139,8 +139,9 @@ class EgoPlanner(Protocol):
         name: shown in summaries, recordings and run ids (letters, digits, ``_ . + -``).
 
     An implementation may also carry ``harm_models``: (model for protected, model for
-    unprotected road users) with which the run evaluates the measured impacts; without
-    it the harm model's defaults apply.
+    unprotected road users) with which the run evaluates the measured impacts, and
+    ``planar_model``: (restitution law, tangential impulse ratio) of the planar impulse
+    model's prediction; without them the defaults apply.
     """
 
     name: str

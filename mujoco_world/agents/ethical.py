@@ -6,6 +6,7 @@ import dataclasses
 
 from ethical_planner.config import PRESETS, PlannerConfig, preset
 from ethical_planner.harm import HarmModel
+from ethical_planner.impulse import RestitutionLaw
 from ethical_planner.planner import Planner
 from mujoco_world.agents.ego_planner import EGO_PLANNERS, EgoPlanner, EgoSetup, Observation, Plan
 
@@ -24,6 +25,8 @@ class EthicalPlanner(EgoPlanner):
         planner: the wrapped planner.
         harm_models: the configuration's harm models, with which the run evaluates
             the measured impacts.
+        planar_model: the configuration's restitution law and tangential impulse
+            ratio, with which the run predicts the planar model's delta-v.
     """
 
     def __init__(self, config: PlannerConfig, setup: EgoSetup) -> None:
@@ -34,6 +37,8 @@ class EthicalPlanner(EgoPlanner):
         self.name = config.name
         self.planner = Planner(config, setup.environment, setup.shape, setup.mass, predictor=setup.predictor)
         self.harm_models: tuple[HarmModel, HarmModel] = (config.risk.harm_model, config.risk.pedestrian_model)
+        risk = config.risk
+        self.planar_model: tuple[RestitutionLaw, float] = (risk.restitution_law, risk.impulse_ratio)
 
     def plan(self, observation: Observation) -> Plan:
         """One planning cycle of the ethical planner."""

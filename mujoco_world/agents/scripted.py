@@ -185,9 +185,10 @@ class SwitchingPlanner(EgoPlanner):
         check_non_negative("SwitchingPlanner", at=at)
         self.first, self.then, self.at = first, then, float(at)
         self.name = name or f"{first.name}+{then.name}"
-        harm_models = getattr(first, "harm_models", None)
-        if harm_models is not None:
-            self.harm_models = harm_models
+        for attribute in ("harm_models", "planar_model"):
+            value = getattr(first, attribute, None)
+            if value is not None:
+                setattr(self, attribute, value)
 
     def plan(self, observation: Observation) -> Plan:
         """``first``'s plan before ``at``, ``then``'s after."""

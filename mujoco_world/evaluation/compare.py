@@ -1,10 +1,12 @@
 """Hold a measured impact against what the planner's harm model assumes.
 
-From the same pre-impact states the planner's model predicts delta-v (paper Eq. 1,
-perfectly plastic), the impact angles of ``ethical_planner.harm.impact_angles``
-(direction of the partner's centre) and the harm. Next to that, the harm from the
-*measured* inputs: delta-v from the contact impulse and the angle of the
-force-weighted contact point. Which harm model applies follows SPEC section 3:
+From the same pre-impact states the planner's models predict delta-v (paper Eq. 1,
+perfectly plastic; and the planar impulse model of ``ethical_planner.impulse`` with the
+planner's restitution law and impulse ratio), the impact angles of
+``ethical_planner.harm.impact_angles`` (direction of the partner's centre) and the harm.
+Next to that, the harm from the *measured* inputs: delta-v from the contact impulse over
+the impact sequence and the angle of the force-weighted contact point. Which harm model
+applies follows SPEC section 3:
 protected partners use ``harm_model`` with their own impact angle; an unprotected
 road user uses ``pedestrian_model`` and its (protected) partner the ignore-angle
 model; a wall is a rigid partner with dv = speed, ignore-angle model.
@@ -17,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ethical_planner.config import RiskConfig
 from ethical_planner.harm import (
     DEFAULT_MODEL,
     DEFAULT_PEDESTRIAN_MODEL,
@@ -26,6 +29,7 @@ from ethical_planner.harm import (
     harm,
     impact_angles,
 )
+from ethical_planner.impulse import RestitutionLaw, planar_impulse
 from ethical_planner.records import to_plain
 from ethical_planner.road_users import UNPROTECTED_TYPES, VULNERABLE_TYPES, RoadUserType
 from mujoco_world.physics.impact import BodyImpact, ImpactMeasurement, area_name
@@ -38,23 +42,31 @@ class BodyComparison:
     Attributes:
         group: "ego", "third_party", "vulnerable" or "static".
         model: harm model applied to this body (None for a wall).
-        dv_measured: |J| / m [m/s]. dv_com: |change of centre-of-mass velocity| [m/s].
+        dv_measured: |J| / m over the impact sequence [m/s].
+        dv_first: |J| / m of the first impulse [m/s].
+        dv_com: |change of centre-of-mass velocity| [m/s].
         dv_predicted: Eq. 1 [m/s].
         dv_error: (dv_measured - dv_predicted) / dv_predicted (nan if dv_predicted = 0).
+        dv_planar: the planar impulse model [m/s] (nan against a wall).
+        dv_error_planar: (dv_measured - dv_planar) / dv_planar.
         angle_measured: contact-point angle [rad]. angle_predicted: impact_angles [rad].
         area_measured, area_predicted: reduced areas.
         clock_measured, clock_predicted: clock areas 1..12.
         force_clock: principal direction of force as a clock position.
         harm_measured: harm from the measured dv and angle.
-        harm_predicted: harm from the predicted dv and angle.
+        harm_predicted: harm from the predicted (Eq. 1) dv and angle.
+        harm_planar: harm from the planar model's dv and the predicted angle.
     """
 
     group: str
     model: str | None
     dv_measured: float
+    dv_first: float
     dv_com: float
     dv_predicted: float
     dv_error: float
+    dv_planar: float
+    dv_error_planar: float
     angle_measured: float
     angle_predicted: float
     area_measured: str
@@ -64,6 +76,7 @@ class BodyComparison:
     force_clock: int
     harm_measured: float
     harm_predicted: float
+    harm_planar: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,6 +134,8 @@ def compare_impact(
     measurement: ImpactMeasurement,
     harm_model: HarmModel | str = DEFAULT_MODEL,
     pedestrian_model: HarmModel | str = DEFAULT_PEDESTRIAN_MODEL,
+    restitution: RestitutionLaw | None = None,
+    impulse_ratio: float | None = None,
 ) -> ImpactRecord:
     """Predict the impact from its pre-impact states and compare with the measurement.
 
@@ -128,33 +143,55 @@ def compare_impact(
         measurement: a measured collision.
         harm_model: model of protected road users.
         pedestrian_model: model of unprotected road users.
+        restitution: restitution law of the planar model (default: the planner's default).
+        impulse_ratio: largest tangential / normal impulse of the planar model (default:
+            the planner's default).
     """
     harm_model = HarmModel.parse(harm_model)
     pedestrian_model = HarmModel.parse(pedestrian_model)
+    defaults = RiskConfig()
+    restitution = restitution or defaults.restitution_law
+    impulse_ratio = defaults.impulse_ratio if impulse_ratio is None else impulse_ratio
     a, b = measurement.a, measurement.b
     if b.is_static:
         # A rigid wall: dv = speed (SPEC). It has no centre, so the geometric angle is
         # taken as the measured contact angle (the ignore-angle model does not use it).
         dv_a, dv_b = a.speed, 0.0
         angle_a, angle_b = a.impact_angle, 0.0
+        planar_a = planar_b = math.nan
     else:
         dv_a_arr, dv_b_arr = delta_v(a.mass, b.mass, np.array(a.velocity), np.array(b.velocity))
         dv_a, dv_b = float(dv_a_arr), float(dv_b_arr)
         ang_a, ang_b = impact_angles(a.position[0], a.position[1], a.yaw, b.position[0], b.position[1], b.yaw)
         angle_a, angle_b = float(ang_a), float(ang_b)
+        planar = planar_impulse(
+            a.mass, a.position, a.yaw, a.length, a.width, a.velocity,
+            b.mass, b.position, b.yaw, b.length, b.width, b.velocity,
+            restitution, impulse_ratio, round_a=_round(a), round_b=_round(b),
+        )  # fmt: skip
+        planar_a, planar_b = float(planar.dv_a), float(planar.dv_b)
     return ImpactRecord(
         measurement=measurement,
-        a=_compare_body(a, b, dv_a, angle_a, harm_model, pedestrian_model),
-        b=_compare_body(b, a, dv_b, angle_b, harm_model, pedestrian_model),
+        a=_compare_body(a, b, dv_a, planar_a, angle_a, harm_model, pedestrian_model),
+        b=_compare_body(b, a, dv_b, planar_b, angle_b, harm_model, pedestrian_model),
         harm_model=harm_model.value,
         pedestrian_model=pedestrian_model.value,
     )
+
+
+def _round(body: BodyImpact) -> bool:
+    return body.type == RoadUserType.PEDESTRIAN.value
+
+
+def _relative_error(measured: float, predicted: float) -> float:
+    return (measured - predicted) / predicted if predicted > 1e-9 else math.nan
 
 
 def _compare_body(
     body: BodyImpact,
     partner: BodyImpact,
     dv_predicted: float,
+    dv_planar: float,
     angle_predicted: float,
     harm_model: HarmModel,
     pedestrian_model: HarmModel,
@@ -162,18 +199,23 @@ def _compare_body(
     model = _model_for(body, partner, harm_model, pedestrian_model)
     dv_measured = body.dv_impulse
     if model is None:
-        harm_measured = harm_predicted = math.nan
+        harm_measured = harm_predicted = harm_planar = math.nan
     else:
         harm_measured = float(harm(model, dv_measured, body.impact_angle))
         harm_predicted = float(harm(model, dv_predicted, angle_predicted))
-    error = (dv_measured - dv_predicted) / dv_predicted if dv_predicted > 1e-9 else math.nan
+        harm_planar = float(harm(model, dv_planar, angle_predicted)) if math.isfinite(dv_planar) else math.nan
     return BodyComparison(
         group=group_of(body),
         model=None if model is None else model.value,
         dv_measured=dv_measured,
+        dv_first=body.dv_first,
         dv_com=body.dv_com,
         dv_predicted=float(dv_predicted),
-        dv_error=float(error),
+        dv_error=float(_relative_error(dv_measured, dv_predicted)),
+        dv_planar=float(dv_planar),
+        dv_error_planar=float(_relative_error(dv_measured, dv_planar))
+        if math.isfinite(dv_planar)
+        else math.nan,
         angle_measured=body.impact_angle,
         angle_predicted=float(angle_predicted),
         area_measured=body.reduced_area,
@@ -183,4 +225,5 @@ def _compare_body(
         force_clock=body.force_clock,
         harm_measured=harm_measured,
         harm_predicted=harm_predicted,
+        harm_planar=harm_planar,
     )

@@ -135,6 +135,7 @@ class ClosedLoop:
         setup = EgoSetup(world.environment(), shape, ego.mass, world.goal_s, predictor, config.predictor)
         self.planner = make_ego_planner(planner, setup)
         self.harm_models = getattr(self.planner, "harm_models", (DEFAULT_MODEL, DEFAULT_PEDESTRIAN_MODEL))
+        self.planar_model = getattr(self.planner, "planar_model", (None, None))
         self.world = world
         self.rng = np.random.default_rng(seed)
         self.run = RunState(world, scenario, str(self.planner.name), int(seed))
@@ -212,7 +213,7 @@ class ClosedLoop:
         clock = time.perf_counter()
         run = self.run
         for m in measurements:
-            record = compare_impact(m, *self.harm_models)
+            record = compare_impact(m, *self.harm_models, *self.planar_model)
             run.collisions.append(record)
             if run.crash_time is None and self.crash.counts(record):
                 run.crash_time = m.time

@@ -24,7 +24,7 @@ from ethical_planner.validation import check_non_negative
 from mujoco_world.agents.behaviour import Fleet, WorldView
 from mujoco_world.physics.control import ControlConfig, TrajectoryReference, brake_forces, tracking_forces
 from mujoco_world.physics.impact import ImpactMeasurement, ImpactRecorder
-from mujoco_world.physics.scene import NO_ENTITY, BodyProxy, Scene
+from mujoco_world.physics.scene import BodyProxy, Scene
 from mujoco_world.scenario.road import build_road
 from mujoco_world.scenario.spec import RoadName, RouteSpec, Scenario
 
@@ -181,16 +181,9 @@ class World:
     # ------------------------------------------------------------------ setup
 
     def _check_no_overlap(self) -> None:
-        data = self.scene.data
-        if not data.ncon:
-            return
-        entity = self.scene.geom_entity
-        e1 = entity[data.contact.geom1]
-        e2 = entity[data.contact.geom2]
-        bad = (e1 != NO_ENTITY) & (e2 != NO_ENTITY) & (e1 != e2) & (data.contact.dist < -1e-6)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            names = [self._entity_name(int(e)) for e in (e1[i], e2[i])]
+        bad = self.scene.overlaps()
+        if bad:
+            names = [self._entity_name(e) for e in bad[0]]
             raise ValueError(
                 f"scenario {self.scenario.name!r}: {names[0]} and {names[1]} overlap at the start"
             )
@@ -445,15 +438,13 @@ class World:
             self._control_countdown = self.control_interval
         self._control_countdown -= 1
         recorder = self.recorder
-        recorder.before_step()
         t_physics = clock()
-        scene.step()
+        done = scene.step(recorder)  # physics and impact measurement, sub-stepped in impacts
         self._steps += 1
         if self._steps % self._history_interval == 0:
             self._sample_history()
         t_measure = clock()
-        done = recorder.after_step() if (scene.data.ncon or recorder.busy) else []
-        if scene.data.ncon:
+        if scene.contact_possible:
             new = recorder.touched & ~self.crashed
             if new.any():
                 self.crashed |= new

@@ -1,25 +1,46 @@
 """Impact measurement from MuJoCo contact forces.
 
-The physics is the ground truth the harm model only assumes. For every pair of
-bodies (or a body and a wall) that touch, ``ImpactRecorder`` integrates the contact
-forces of that pair over the contact episode:
+The physics is the ground truth the harm model only assumes. For every pair of bodies
+(or a body and a wall) that touch, ``ImpactRecorder`` integrates the contact forces of
+that pair (``mujoco.mj_contactForce`` in the contact frame, rotated to world with
+``contact.frame``, and the rigid mode's Coulomb friction) over the pair's **impact sequence**.
 
-* impulse J = sum F dt on each body (``mujoco.mj_contactForce`` in the contact
-  frame, rotated to world with ``contact.frame``); delta-v = J / m,
-* the change of the centre-of-mass velocity from the step before the first contact
-  to the step after the last one (equal to J / m while no other force acts),
-* the principal direction of force (where the force comes from, in the body frame,
-  and its clock position), the force-weighted contact point in the body frame (its
-  angle gives the impact area: reduced front/side/rear and the 12 clock areas),
-* peak force, duration, deepest penetration and the restitution.
+The measurement window (``MeasurementWindow``; issue 15 keeps controllers on outside it):
 
-Usage without a planner: ``ImpactRig(body_a, body_b).launch(state_a, state_b)``
-(or ``measure_impact``) launches two bodies at each other and returns one
-``ImpactMeasurement``; the rig compiles its model once and is reused for sweeps.
+* A **sequence** starts at the pair's first contact force and stays open until the pair
+  has had no contact force for ``separation_time`` (0.5 s, long against a rigid pulse of
+  ~4 ms and a crush pulse of ~0.1 s), so secondary hits of a spinning body (a glancing
+  front hit followed by a side slap) belong to it. Bodies still pressed together
+  ``max_duration`` (2 s) after the start close it as ``ended_in_contact``.
+* An **impulse** (pulse) is a run of contact force without a gap of ``pulse_gap``
+  (10 ms). ``ImpactRecorder.in_pulse`` marks the bodies inside one right now: outside
+  it no contact force acts on a body, so its own controller does not touch the
+  measured impulse (braking after a crash is switched off only inside a pulse).
 
-Inside a running scene call ``recorder.before_step()`` and
-``recorder.after_step()`` around every ``mj_step``; ``after_step`` returns the
-episodes that ended (no force for ``separation_time``).
+Per sequence and body:
+
+* impulse J = sum F dt over the sequence (contact forces as measured by
+  ``physics.contact.measure_contact_forces``, plus the Coulomb friction the rigid mode
+  applies), delta-v = |J| / m (``dv_impulse``), and the first impulse's delta-v separately
+  (``dv_first``); the centre-of-mass velocity change over the sequence (``dv_com``; equal to
+  J / m while no other force acts, as in the rig);
+* the principal direction of force: the sequence's impulse in the body frame at the
+  impulse-weighted moment (the body's impulse-weighted yaw; a struck body may spin 90 deg
+  during a sequence), with its clock position;
+* the force-weighted contact point in the body frame (each step's point in that step's
+  body frame) with its reduced and clock impact area.
+
+Per sequence: peak force and when it came, the impulses' sizes and times (``multi_impact``
+when later impulses carry more than ``MULTI_IMPACT_SHARE`` of the total), the deepest
+penetration, and the first impulse's **restitution at the contact point along the contact
+normal**: -(u_n after) / (u_n before), u the velocity of b's material point at the
+force-weighted contact point relative to a's, n the force-weighted contact normal.
+
+Usage without a planner: ``ImpactRig(body_a, body_b).launch(state_a, state_b)`` (or
+``measure_impact``) launches two bodies at each other and returns one
+``ImpactMeasurement``; the rig compiles its model once and is reused for sweeps. Inside a
+scene, pass the recorder to ``Scene.step(recorder)``: it is called around every physics
+(sub-)step and ``Scene.step`` returns the sequences that closed.
 """
 
 from __future__ import annotations
@@ -27,20 +48,50 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import mujoco
 import numpy as np
 
 from ethical_planner.harm import ReducedArea, clock_area, reduced_area
 from ethical_planner.records import to_plain
 from ethical_planner.road_users import KinematicState
 from ethical_planner.validation import check, check_positive
-from mujoco_world.physics.scene import NO_ENTITY, STATIC, BodyProxy, Scene
+from mujoco_world.physics.control import ControlConfig, brake_forces
+from mujoco_world.physics.scene import STATIC, BodyProxy, Scene
 from mujoco_world.scenario.spec import ContactSpec
 
-#: Contact-free time after which an episode is closed [s].
-SEPARATION_TIME_S = 0.03
-#: Longest crash pulse: bodies still in contact after this move on together [s].
-MAX_PULSE_S = 0.4
+#: Share of the summed impulse magnitudes carried by impulses after the first above
+#: which a sequence is flagged ``multi_impact``.
+MULTI_IMPACT_SHARE = 0.05
+
+
+@dataclass(frozen=True, slots=True)
+class MeasurementWindow:
+    """When an impact sequence and its impulses start and end (see the module docstring).
+
+    Attributes:
+        pulse_gap: contact-force-free time that ends an impulse [s].
+        separation_time: contact-force-free time that closes a sequence [s].
+        max_duration: longest sequence; bodies still pressed together then move on as one [s].
+        new_impact_acceleration: after a sequence, a contact force above this times the
+            lighter mass starts a new one; gentler touches of the resting pair are ignored [m/s^2].
+        rest_memory: how long a closed pair counts as resting after its last contact [s].
+    """
+
+    pulse_gap: float = 0.01
+    separation_time: float = 0.5
+    max_duration: float = 2.0
+    new_impact_acceleration: float = 30.0
+    rest_memory: float = 1.0
+
+    def __post_init__(self) -> None:
+        check_positive(
+            "window",
+            pulse_gap=self.pulse_gap,
+            separation_time=self.separation_time,
+            max_duration=self.max_duration,
+            new_impact_acceleration=self.new_impact_acceleration,
+            rest_memory=self.rest_memory,
+        )
+        check(self.pulse_gap <= self.separation_time, "window.pulse_gap must be <= window.separation_time")
 
 
 def area_name(angle: float) -> str:
@@ -50,23 +101,27 @@ def area_name(angle: float) -> str:
 
 @dataclass(frozen=True, slots=True)
 class BodyImpact:
-    """What one body experienced in a collision (world frame unless stated).
+    """What one body experienced in an impact sequence (world frame unless stated).
 
     Attributes:
         entity: index of the body in the scene, or ``STATIC`` (-1) for a wall or kerb.
         name: body name. type: road-user type or the static kind ("wall", "kerb").
         mass: [kg]; inf for a static obstacle.
+        length: footprint length [m] (nan for a static obstacle).
+        width: footprint width [m] (nan for a static obstacle).
         position: centre before the impact [m], (x, y).
         yaw: heading before the impact [rad].
         velocity: velocity before the impact [m/s], (vx, vy).
-        velocity_after: velocity after the contact episode [m/s].
+        velocity_after: velocity after the sequence's last contact [m/s].
         yaw_rate: yaw rate before the impact [rad/s].
-        yaw_rate_after: yaw rate after the contact episode [rad/s].
-        impulse: contact impulse received [N s], (Jx, Jy).
+        yaw_rate_after: yaw rate after the sequence's last contact [rad/s].
+        impulse: contact impulse received over the sequence [N s], (Jx, Jy).
         delta_v_impulse: impulse / mass [m/s], (x, y).
-        delta_v_com: change of the centre-of-mass velocity [m/s], (x, y).
-        force_angle: principal direction of force in the body frame [rad]: the
-            direction the force comes from (0 = from the front, +pi/2 = from the left).
+        delta_v_first: the first impulse / mass [m/s], (x, y).
+        delta_v_com: change of the centre-of-mass velocity from before the first to after the
+            last contact [m/s], (x, y) (includes other forces acting meanwhile, e.g. braking).
+        force_angle: principal direction of force in the body frame at the impulse-weighted
+            moment [rad]: where the force comes from (0 = the front, +pi/2 = the left).
         force_clock: clock position 1..12 of ``force_angle``.
         contact_point: force-weighted contact point in the body frame [m], (x fwd, y left).
         impact_angle: angle of ``contact_point`` [rad] in (-pi, pi].
@@ -78,6 +133,8 @@ class BodyImpact:
     name: str
     type: str
     mass: float
+    length: float
+    width: float
     position: tuple[float, float]
     yaw: float
     velocity: tuple[float, float]
@@ -86,6 +143,7 @@ class BodyImpact:
     yaw_rate_after: float
     impulse: tuple[float, float]
     delta_v_impulse: tuple[float, float]
+    delta_v_first: tuple[float, float]
     delta_v_com: tuple[float, float]
     force_angle: float
     force_clock: int
@@ -96,8 +154,13 @@ class BodyImpact:
 
     @property
     def dv_impulse(self) -> float:
-        """|delta-v| from the impulse [m/s]."""
+        """|delta-v| over the whole sequence, from the impulse [m/s]."""
         return float(math.hypot(*self.delta_v_impulse))
+
+    @property
+    def dv_first(self) -> float:
+        """|delta-v| of the first impulse [m/s]."""
+        return float(math.hypot(*self.delta_v_first))
 
     @property
     def dv_com(self) -> float:
@@ -122,7 +185,7 @@ class BodyImpact:
 
 @dataclass(frozen=True, slots=True)
 class ImpactMeasurement:
-    """One collision event between two bodies, measured from the contact forces.
+    """One impact sequence between two bodies, measured from the contact forces.
 
     Attributes:
         time: first contact [s].
@@ -130,11 +193,17 @@ class ImpactMeasurement:
         a: the first body (the lower entity index; the ego is entity 0).
         b: the second body, or the static obstacle.
         peak_force: largest magnitude of the pair's total contact force [N].
-        impulse: |J| [N s].
-        max_penetration: deepest geom overlap during the episode [m].
-        restitution: relative separation speed / closing speed along the impulse.
+        peak_time: when it came, after ``time`` [s].
+        impulse: |J| over the sequence [N s].
+        impulses: |J| of every impulse of the sequence, in order [N s].
+        impulse_times: (start, end) of every impulse, after ``time`` [s].
+        max_penetration: deepest geom overlap during the sequence [m].
+        restitution: of the first impulse, at the contact point along the contact normal
+            (nan if the bodies did not approach there).
+        contact_normal: force-weighted normal of the first impulse, from a to b (world).
+        contact_position: force-weighted contact point of the first impulse [m] (world).
         complete: False if the run ended before the bodies separated.
-        multi_body: a third body touched a or b during the episode (the pair's
+        multi_body: a third body touched a or b during the sequence (the pair's
             prediction then misses forces).
         ended_in_contact: the bodies were still pressed together after ``max_duration``.
     """
@@ -144,56 +213,71 @@ class ImpactMeasurement:
     a: BodyImpact
     b: BodyImpact
     peak_force: float
+    peak_time: float
     impulse: float
+    impulses: tuple[float, ...]
+    impulse_times: tuple[tuple[float, float], ...]
     max_penetration: float
     restitution: float
+    contact_normal: tuple[float, float]
+    contact_position: tuple[float, float]
     complete: bool = True
     multi_body: bool = False
     ended_in_contact: bool = False
+
+    @property
+    def n_impulses(self) -> int:
+        """Number of impulses in the sequence."""
+        return len(self.impulses)
+
+    @property
+    def first_impulse_share(self) -> float:
+        """|J| of the first impulse over the summed |J| of all impulses."""
+        total = sum(self.impulses)
+        return self.impulses[0] / total if total > 0 else 1.0
+
+    @property
+    def multi_impact(self) -> bool:
+        """Later impulses carry more than ``MULTI_IMPACT_SHARE`` of the summed impulse."""
+        return 1.0 - self.first_impulse_share > MULTI_IMPACT_SHARE
 
     def to_dict(self) -> dict:
         """JSON-able dict of every field (infinite masses become "inf"; see ``records.to_plain``)."""
         return to_plain(self)
 
 
-class _Episode:
-    """Accumulators of one open contact episode."""
+class _Sequence:
+    """Accumulators of one open impact sequence."""
 
     __slots__ = (
-        "a",
-        "b",
-        "t_start",
-        "t_last",
-        "pre_qpos_a",
-        "pre_qvel_a",
-        "pre_qpos_b",
-        "pre_qvel_b",
-        "post_qvel_a",
-        "post_qvel_b",
-        "impulse_b",
-        "point_sum_a",
-        "point_sum_b",
-        "weight",
-        "peak",
+        "a", "b", "t_start", "t_last", "pre_qpos", "pre_qvel", "post_qpos", "post_qvel",
+        "impulse_b", "impulses", "first_point", "first_normal", "first_weight", "first_post_qpos",
+        "first_post_qvel", "point_sum", "yaw_sum", "weight", "force_weight", "peak", "peak_time",
         "penetration",
-        "multi_body",
-        "ended_in_contact",
-    )
+        "multi_body", "ended_in_contact",
+    )  # fmt: skip
 
     def __init__(self, a: int, b: int, t: float, prev_qpos: np.ndarray, prev_qvel: np.ndarray):
         self.a, self.b, self.t_start, self.t_last = a, b, t, t
-        self.pre_qpos_a = prev_qpos[a].copy()
-        self.pre_qvel_a = prev_qvel[a].copy()
         static = b == STATIC
-        self.pre_qpos_b = np.zeros(3) if static else prev_qpos[b].copy()
-        self.pre_qvel_b = np.zeros(3) if static else prev_qvel[b].copy()
-        self.post_qvel_a = self.pre_qvel_a.copy()
-        self.post_qvel_b = self.pre_qvel_b.copy()
+        self.pre_qpos = np.array([prev_qpos[a], np.zeros(3) if static else prev_qpos[b]])
+        self.pre_qvel = np.array([prev_qvel[a], np.zeros(3) if static else prev_qvel[b]])
+        self.post_qpos = self.pre_qpos.copy()
+        self.post_qvel = self.pre_qvel.copy()
         self.impulse_b = np.zeros(2)
-        self.point_sum_a = np.zeros(2)
-        self.point_sum_b = np.zeros(2)
+        # One row per impulse: Jx, Jy (on b), start, end.
+        self.impulses: list[list[float]] = []
+        self.first_point = np.zeros(2)
+        self.first_normal = np.zeros(2)
+        self.first_weight = 0.0
+        self.first_post_qpos = self.pre_qpos.copy()
+        self.first_post_qvel = self.pre_qvel.copy()
+        self.point_sum = np.zeros((2, 2))  # per body, in the body frame
+        self.yaw_sum = np.zeros(2)  # per body, yaw change since the start, force-weighted
         self.weight = 0.0
+        self.force_weight = 0.0
         self.peak = 0.0
+        self.peak_time = 0.0
         self.penetration = 0.0
         self.multi_body = False
         self.ended_in_contact = False
@@ -205,76 +289,76 @@ def _to_body_frame(point: np.ndarray, qpos: np.ndarray) -> np.ndarray:
     return np.array([c * dx + s * dy, -s * dx + c * dy])
 
 
+def _rotate_into(vector: np.ndarray, yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([c * vector[0] + s * vector[1], -s * vector[0] + c * vector[1]])
+
+
+def _wrap(angle: float) -> float:
+    return math.remainder(angle, 2.0 * math.pi)
+
+
+def _point_velocity(qpos: np.ndarray, qvel: np.ndarray, point: np.ndarray) -> np.ndarray:
+    rx, ry = point[0] - qpos[0], point[1] - qpos[1]
+    return np.array([qvel[0] - qvel[2] * ry, qvel[1] + qvel[2] * rx])
+
+
 class ImpactRecorder:
-    """Tracks contact episodes in a ``Scene`` and measures each one.
+    """Tracks impact sequences in a ``Scene`` and measures each one.
 
-    Call ``before_step`` and ``after_step`` around every physics step. Contacts are
-    filtered by geom entity with numpy before ``mj_contactForce`` is called on the
-    few that matter.
-
-    An episode (the crash pulse of one pair) starts at the pair's first contact
-    force and ends when the pair has been apart for ``separation_time`` or, if the
-    bodies stay pressed together (they move on as one), ``max_duration`` after its
-    start. After its pulse a pair is *resting* for ``rest_memory``: touches between
-    braking bodies are ignored, only a contact force above ``new_impact_acceleration``
-    times the lighter mass starts a new episode (a second hit, e.g. a chain collision).
+    Pass it to ``Scene.step`` (or call ``before_step`` and ``after_step`` around every
+    physics step yourself). Contacts are filtered by geom entity with numpy before
+    ``mj_contactForce`` is called on the few that matter. After a sequence closes, its
+    pair *rests* for ``window.rest_memory``: touches between braking bodies are ignored,
+    only a contact force above ``window.new_impact_acceleration`` times the lighter mass
+    starts a new sequence (a second hit, e.g. a chain collision).
 
     Attributes:
         scene: the scene observed.
-        separation_time: contact-free time that closes an episode [s].
-        max_duration: longest crash pulse [s].
-        new_impact_acceleration: force / lighter mass that counts as a new hit of a
-            resting pair [m/s^2].
-        rest_memory: how long a pair counts as resting after its last contact [s].
-        in_pulse: (n,) bool, bodies in an open episode (their brakes stay off).
+        window: the measurement window.
+        in_pulse: (n,) bool, bodies inside an impulse (contact force within ``pulse_gap``).
+        in_sequence: (n,) bool, bodies in an open sequence.
         touched: (n,) bool, bodies that have had any contact force so far.
         max_penetration: deepest overlap seen so far [m].
+        trace: if True, ``traces`` keeps every sequence's force history.
+        traces: (a, b, start time) -> array of rows (t [s], Fx, Fy on b [N], depth [m],
+            yaw of a, yaw of b [rad] after the step).
     """
 
-    def __init__(
-        self,
-        scene: Scene,
-        separation_time: float = SEPARATION_TIME_S,
-        max_duration: float = MAX_PULSE_S,
-        new_impact_acceleration: float = 30.0,
-        rest_memory: float = 1.0,
-    ) -> None:
-        check_positive(
-            "ImpactRecorder",
-            separation_time=separation_time,
-            max_duration=max_duration,
-            new_impact_acceleration=new_impact_acceleration,
-            rest_memory=rest_memory,
-        )
+    def __init__(self, scene: Scene, window: MeasurementWindow | None = None, trace: bool = False) -> None:
         self.scene = scene
-        self.rest_memory = float(rest_memory)
-        self.separation_time = float(separation_time)
-        self.max_duration = float(max_duration)
-        self.new_impact_acceleration = float(new_impact_acceleration)
+        self.window = window or MeasurementWindow()
+        self.trace = bool(trace)
+        self.traces: dict[tuple[int, int, float], np.ndarray] = {}
+        self._rows: dict[tuple[int, int], list[tuple[float, ...]]] = {}
         self._prev_qpos = scene.qpos.copy()
         self._prev_qvel = scene.qvel.copy()
-        self._open: dict[tuple[int, int], _Episode] = {}
+        self._dt = scene.dt
+        self._open: dict[tuple[int, int], _Sequence] = {}
         self._resting: dict[tuple[int, int], float] = {}
-        self._force = np.zeros(6)
         self.in_pulse = np.zeros(scene.n, dtype=bool)
+        self.in_sequence = np.zeros(scene.n, dtype=bool)
         self.touched = np.zeros(scene.n, dtype=bool)
         self.max_penetration = 0.0
 
     @property
     def has_open_episodes(self) -> bool:
-        """True while some pair is in (or just after) a crash pulse."""
+        """True while some pair is in an open impact sequence."""
         return bool(self._open)
 
     @property
     def busy(self) -> bool:
-        """True while an episode is open or a pair rests in contact."""
+        """True while a sequence is open or a pair rests after one."""
         return bool(self._open or self._resting)
 
     def reset(self) -> None:
-        """Forget all episodes (after ``Scene.reset``)."""
+        """Forget all sequences (after ``Scene.reset``)."""
         self._open.clear()
         self._resting.clear()
+        self._rows.clear()
+        self.traces.clear()
         self.in_pulse[:] = False
+        self.in_sequence[:] = False
         self.touched[:] = False
         self.max_penetration = 0.0
 
@@ -282,72 +366,61 @@ class ImpactRecorder:
         """Snapshot the state the coming step's contacts are computed from."""
         np.copyto(self._prev_qpos, self.scene.qpos)
         np.copyto(self._prev_qvel, self.scene.qvel)
+        self._dt = float(self.scene.model.opt.timestep)
 
     def after_step(self) -> list[ImpactMeasurement]:
-        """Integrate the step's contact forces; return the episodes that ended."""
+        """Integrate the step's contact forces; return the sequences that closed."""
         scene = self.scene
         data = scene.data
-        t = float(data.time) - scene.dt  # the forces acted during [t, t + dt]
+        t = float(data.time) - self._dt  # the forces acted during [t, t + dt]
         finished: list[ImpactMeasurement] = []
-        if data.ncon:
+        if scene.dynamics.forces.size:
             self._accumulate(t, finished)
         if not (self._open or self._resting):
             return finished
-        gap = self.separation_time - 1e-12
-        for key, episode in list(self._open.items()):
-            if t - episode.t_last >= gap:
-                finished.append(self._finish(episode, complete=True))
+        window = self.window
+        for key, seq in list(self._open.items()):
+            if t - seq.t_last >= window.separation_time - 1e-12:
+                finished.append(self._finish(seq, complete=True))
                 del self._open[key]
-                self._resting[key] = episode.t_last
+                self._resting[key] = seq.t_last
         for key, last in list(self._resting.items()):
-            if t - last >= self.rest_memory:
+            if t - last >= window.rest_memory:
                 del self._resting[key]
         self.in_pulse[:] = False
-        for a, b in self._open:
-            self.in_pulse[a] = True
-            if b != STATIC:
-                self.in_pulse[b] = True
+        self.in_sequence[:] = False
+        for (a, b), seq in self._open.items():
+            pulsing = t - seq.t_last < window.pulse_gap
+            for x in (a, b):
+                if x != STATIC:
+                    self.in_sequence[x] = True
+                    self.in_pulse[x] |= pulsing
         return finished
 
     def finish(self, complete: bool = False) -> list[ImpactMeasurement]:
-        """Close every open episode (end of a run).
+        """Close every open sequence (end of a run).
 
         Args:
             complete: mark them complete (e.g. the bodies have come to rest).
         """
-        finished = [self._finish(ep, complete=complete) for ep in self._open.values()]
+        finished = [self._finish(seq, complete=complete) for seq in self._open.values()]
         self._open.clear()
         self._resting.clear()
         self.in_pulse[:] = False
+        self.in_sequence[:] = False
         return finished
 
     def _accumulate(self, t: float, finished: list[ImpactMeasurement]) -> None:
-        scene, data = self.scene, self.scene.data
-        contact = data.contact
-        e1 = scene.geom_entity[contact.geom1]
-        e2 = scene.geom_entity[contact.geom2]
-        keep = (contact.efc_address >= 0) & (e1 != e2) & (e1 != NO_ENTITY) & (e2 != NO_ENTITY)
-        index = np.flatnonzero(keep)
-        if index.size == 0:
+        scene = self.scene
+        forces = scene.dynamics.forces
+        if forces.size == 0:
             return
-        e1, e2 = e1[index], e2[index]
-        forces = np.empty((index.size, 3))
-        for k, i in enumerate(index):
-            mujoco.mj_contactForce(scene.model, data, int(i), self._force)
-            forces[k] = self._force[:3]
-        frames = contact.frame[index].reshape(-1, 3, 3)
-        # The contact frame's rows are its axes; the force acts on geom2 (normal from 1 to 2).
-        world = np.einsum("ki,kij->kj", forces, frames)[:, :2]
-        points = contact.pos[index, :2]
-        depth = -contact.dist[index]
-        # Order each pair as (body, higher body) or (body, STATIC); force on b.
-        swap = (e1 == STATIC) | ((e2 != STATIC) & (e2 < e1))
-        a = np.where(swap, e2, e1)
-        b = np.where(swap, e1, e2)
-        force_b = np.where(swap[:, None], -world, world)
-        magnitude = np.hypot(world[:, 0], world[:, 1])
+        a, b = forces.a, forces.b
+        force_b = forces.force_b
+        magnitude = np.hypot(force_b[:, 0], force_b[:, 1])
+        depth = forces.depth
         self.max_penetration = max(self.max_penetration, float(depth.max()))
-        dt = scene.dt
+        dt = self._dt
         pairs = sorted({(int(x), int(y)) for x, y in zip(a, b, strict=True)})
         partners = np.zeros(scene.n, dtype=np.int64)
         for pa, pb in pairs:
@@ -355,6 +428,7 @@ class ImpactRecorder:
             if pb != STATIC:
                 partners[pb] += 1
         masses = scene.masses
+        window = self.window
         for pair in pairs:
             rows = (a == pair[0]) & (b == pair[1])
             weights = magnitude[rows]
@@ -363,68 +437,132 @@ class ImpactRecorder:
                 continue
             total = force_b[rows].sum(axis=0)
             force = float(np.hypot(*total))
-            episode = self._open.get(pair)
-            if episode is None:
+            seq = self._open.get(pair)
+            if seq is None:
                 if pair in self._resting:
                     lighter = masses[pair[0]] if pair[1] == STATIC else min(masses[pair[0]], masses[pair[1]])
-                    if force < self.new_impact_acceleration * lighter:
+                    if force < window.new_impact_acceleration * lighter:
                         self._resting[pair] = t
                         continue
                     del self._resting[pair]
-                episode = _Episode(pair[0], pair[1], t, self._prev_qpos, self._prev_qvel)
-                self._open[pair] = episode
-            episode.t_last = t
-            episode.impulse_b += total * dt
-            point = (weights[:, None] * points[rows]).sum(axis=0) / weight_sum
-            w = weight_sum * dt
-            episode.point_sum_a += w * _to_body_frame(point, self._prev_qpos[pair[0]])
-            if pair[1] != STATIC:
-                episode.point_sum_b += w * _to_body_frame(point, self._prev_qpos[pair[1]])
-                episode.post_qvel_b = scene.qvel[pair[1]].copy()
-                self.touched[pair[1]] = True
-                episode.multi_body |= bool(partners[pair[1]] > 1)
-            episode.post_qvel_a = scene.qvel[pair[0]].copy()
-            self.touched[pair[0]] = True
-            episode.multi_body |= bool(partners[pair[0]] > 1)
-            episode.weight += w
-            episode.peak = max(episode.peak, force)
-            episode.penetration = max(episode.penetration, float(depth[rows].max()))
-            if t - episode.t_start >= self.max_duration - 1e-12:
-                # Still pressed together: the pulse is over, the pair now rests in contact.
-                episode.ended_in_contact = True
-                finished.append(self._finish(episode, complete=True))
+                seq = _Sequence(pair[0], pair[1], t, self._prev_qpos, self._prev_qvel)
+                self._open[pair] = seq
+                if self.trace:
+                    self._rows[pair] = []
+            self._add(
+                seq,
+                t,
+                dt,
+                total,
+                force,
+                weights,
+                weight_sum,
+                forces.point[rows],
+                forces.normal[rows],
+                depth[rows],
+            )
+            seq.multi_body |= bool(partners[pair[0]] > 1) or (
+                pair[1] != STATIC and bool(partners[pair[1]] > 1)
+            )
+            if self.trace:
+                yaw_b = scene.qpos[pair[1], 2] if pair[1] != STATIC else 0.0
+                self._rows[pair].append(
+                    (
+                        t,
+                        float(total[0]),
+                        float(total[1]),
+                        float(depth[rows].max()),
+                        scene.qpos[pair[0], 2],
+                        yaw_b,
+                    )
+                )
+            if t - seq.t_start >= window.max_duration - 1e-12:
+                # Still pressed together: the sequence is over, the pair now rests in contact.
+                seq.ended_in_contact = True
+                finished.append(self._finish(seq, complete=True))
                 del self._open[pair]
                 self._resting[pair] = t
 
-    def _body(
+    def _add(
         self,
-        entity: int,
-        qpos: np.ndarray,
-        qvel: np.ndarray,
-        qvel_after: np.ndarray,
-        impulse: np.ndarray,
-        point_sum: np.ndarray,
-        weight: float,
-    ) -> BodyImpact:
+        seq: _Sequence,
+        t: float,
+        dt: float,
+        total: np.ndarray,
+        force: float,
+        weights: np.ndarray,
+        weight_sum: float,
+        points: np.ndarray,
+        normals: np.ndarray,
+        depth: np.ndarray,
+    ) -> None:
+        """Add one step's contact forces of a pair to its sequence."""
         scene = self.scene
+        new_impulse = not seq.impulses or t - seq.t_last >= self.window.pulse_gap - 1e-12
+        if new_impulse:
+            seq.impulses.append([0.0, 0.0, t, t])
+        current = seq.impulses[-1]
+        current[0] += total[0] * dt
+        current[1] += total[1] * dt
+        current[3] = t
+        seq.t_last = t
+        seq.impulse_b += total * dt
+        point = (weights[:, None] * points).sum(axis=0) / weight_sum
+        w = weight_sum * dt
+        bodies = (seq.a, seq.b)
+        for k, entity in enumerate(bodies):
+            if entity == STATIC:
+                continue
+            prev = self._prev_qpos[entity]
+            seq.point_sum[k] += w * _to_body_frame(point, prev)
+            # Yaw after the step, unwrapped from the pre-impact yaw, weighted by |F| dt.
+            turned = seq.post_qpos[k, 2] + _wrap(scene.qpos[entity, 2] - seq.post_qpos[k, 2])
+            seq.yaw_sum[k] += force * dt * (turned - seq.pre_qpos[k, 2])
+            seq.post_qpos[k] = scene.qpos[entity]
+            seq.post_qpos[k, 2] = turned
+            seq.post_qvel[k] = scene.qvel[entity]
+            self.touched[entity] = True
+        seq.weight += w
+        seq.force_weight += force * dt
+        if len(seq.impulses) == 1:
+            seq.first_point += w * point
+            seq.first_normal += (weights[:, None] * normals).sum(axis=0) * dt
+            seq.first_weight += w
+            seq.first_post_qpos[:] = seq.post_qpos
+            seq.first_post_qvel[:] = seq.post_qvel
+        if force > seq.peak:
+            seq.peak = force
+            seq.peak_time = t - seq.t_start
+        seq.penetration = max(seq.penetration, float(depth.max()))
+
+    def _body(self, seq: _Sequence, k: int, impulse: np.ndarray, first: np.ndarray) -> BodyImpact:
+        scene = self.scene
+        entity = seq.a if k == 0 else seq.b
+        qpos, qvel, qvel_after = seq.pre_qpos[k], seq.pre_qvel[k], seq.post_qvel[k]
         yaw = float(qpos[2])
         if entity == STATIC:
             name, kind, mass = "static", scene.static_kind, math.inf
-            dv_impulse = np.zeros(2)
+            length = width = math.nan
+            dv_impulse = dv_first = np.zeros(2)
         else:
-            name, kind = scene.names[entity], scene.types[entity].value
-            mass = float(scene.masses[entity])
-            dv_impulse = impulse / mass
+            proxy = scene.bodies[entity]
+            name, kind = proxy.name, proxy.type.value
+            mass, length, width = float(scene.masses[entity]), proxy.length, proxy.width
+            dv_impulse, dv_first = impulse / mass, first / mass
+        weight = seq.weight
+        mean_yaw = yaw + (seq.yaw_sum[k] / seq.force_weight if seq.force_weight > 0 else 0.0)
         # Direction the force comes from (opposite to the impulse), in the body frame.
-        source = _to_body_frame(-impulse, np.array([0.0, 0.0, yaw]))
+        source = _rotate_into(-impulse, mean_yaw)
         force_angle = float(math.atan2(source[1], source[0])) if np.any(source) else 0.0
-        point = point_sum / weight if weight > 0 else np.zeros(2)
+        point = seq.point_sum[k] / weight if weight > 0 else np.zeros(2)
         impact_angle = float(math.atan2(point[1], point[0]))
         return BodyImpact(
             entity=int(entity),
             name=name,
             type=kind,
             mass=mass,
+            length=float(length),
+            width=float(width),
             position=(float(qpos[0]), float(qpos[1])),
             yaw=yaw,
             velocity=(float(qvel[0]), float(qvel[1])),
@@ -433,6 +571,7 @@ class ImpactRecorder:
             yaw_rate_after=float(qvel_after[2]),
             impulse=(float(impulse[0]), float(impulse[1])),
             delta_v_impulse=(float(dv_impulse[0]), float(dv_impulse[1])),
+            delta_v_first=(float(dv_first[0]), float(dv_first[1])),
             delta_v_com=(float(qvel_after[0] - qvel[0]), float(qvel_after[1] - qvel[1])),
             force_angle=force_angle,
             force_clock=int(clock_area(force_angle)),
@@ -442,34 +581,49 @@ class ImpactRecorder:
             clock_area=int(clock_area(impact_angle)),
         )
 
-    def _finish(self, ep: _Episode, complete: bool) -> ImpactMeasurement:
-        impulse_b = ep.impulse_b
-        body_a = self._body(
-            ep.a, ep.pre_qpos_a, ep.pre_qvel_a, ep.post_qvel_a, -impulse_b, ep.point_sum_a, ep.weight
-        )
-        body_b = self._body(
-            ep.b, ep.pre_qpos_b, ep.pre_qvel_b, ep.post_qvel_b, impulse_b, ep.point_sum_b, ep.weight
-        )
-        magnitude = float(np.hypot(*impulse_b))
-        restitution = math.nan
-        if magnitude > 0:
-            n = impulse_b / magnitude  # pushes b away from a
-            closing = float(np.dot(ep.pre_qvel_a[:2] - ep.pre_qvel_b[:2], n))
-            separating = float(np.dot(ep.post_qvel_b[:2] - ep.post_qvel_a[:2], n))
-            if closing > 1e-6:
-                restitution = separating / closing
+    def _restitution(self, seq: _Sequence) -> tuple[float, np.ndarray, np.ndarray]:
+        """First impulse: restitution at the contact point along the normal, normal, point."""
+        norm = float(np.hypot(*seq.first_normal))
+        if seq.first_weight <= 0 or norm <= 0:
+            return math.nan, np.zeros(2), np.zeros(2)
+        n = seq.first_normal / norm
+        p = seq.first_point / seq.first_weight
+
+        def relative(qpos: np.ndarray, qvel: np.ndarray) -> float:
+            va = _point_velocity(qpos[0], qvel[0], p)
+            vb = np.zeros(2) if seq.b == STATIC else _point_velocity(qpos[1], qvel[1], p)
+            return float(np.dot(vb - va, n))
+
+        before = relative(seq.pre_qpos, seq.pre_qvel)
+        after = relative(seq.first_post_qpos, seq.first_post_qvel)
+        e = -after / before if before < -1e-6 else math.nan
+        return e, n, p
+
+    def _finish(self, seq: _Sequence, complete: bool) -> ImpactMeasurement:
+        impulse_b = seq.impulse_b
+        first_b = np.array(seq.impulses[0][:2]) if seq.impulses else np.zeros(2)
+        body_a = self._body(seq, 0, -impulse_b, -first_b)
+        body_b = self._body(seq, 1, impulse_b, first_b)
+        restitution, normal, point = self._restitution(seq)
+        if self.trace and (seq.a, seq.b) in self._rows:
+            self.traces[(seq.a, seq.b, seq.t_start)] = np.array(self._rows.pop((seq.a, seq.b)))
         return ImpactMeasurement(
-            time=ep.t_start,
-            duration=ep.t_last - ep.t_start + self.scene.dt,
+            time=seq.t_start,
+            duration=seq.t_last - seq.t_start + self._dt,
             a=body_a,
             b=body_b,
-            peak_force=ep.peak,
-            impulse=magnitude,
-            max_penetration=ep.penetration,
-            restitution=restitution,
+            peak_force=seq.peak,
+            peak_time=seq.peak_time,
+            impulse=float(np.hypot(*impulse_b)),
+            impulses=tuple(float(math.hypot(j[0], j[1])) for j in seq.impulses),
+            impulse_times=tuple((j[2] - seq.t_start, j[3] - seq.t_start + self._dt) for j in seq.impulses),
+            max_penetration=seq.penetration,
+            restitution=float(restitution),
+            contact_normal=(float(normal[0]), float(normal[1])),
+            contact_position=(float(point[0]), float(point[1])),
             complete=complete,
-            multi_body=ep.multi_body,
-            ended_in_contact=ep.ended_in_contact,
+            multi_body=seq.multi_body,
+            ended_in_contact=seq.ended_in_contact,
         )
 
 
@@ -478,17 +632,22 @@ def _state_velocity(state: KinematicState) -> tuple[float, float]:
 
 
 class ImpactRig:
-    """Two free bodies launched at each other in an empty scene.
+    """Two bodies launched at each other in an empty scene.
 
     The model is compiled once; every ``launch`` resets the data, so one rig serves
-    thousands of controlled impacts. No actuator acts: the bodies coast, so the
-    centre-of-mass and impulse delta-v agree.
+    thousands of controlled impacts. The bodies coast until they touch; from then on,
+    as in the closed-loop world, they brake (skid) at the tyre friction limit outside
+    the impact pulses (``brake=False``: they coast throughout, and the centre-of-mass and
+    impulse delta-v agree).
 
     Args:
         body_a: first proxy (``BodyProxy.of_type("car", "car")`` etc.).
         body_b: second proxy.
-        contact: contact model (defaults: near-plastic, solref "0.05 4").
+        contact: contact model (default: rigid).
         timestep: physics step [s].
+        window: measurement window.
+        trace: keep the force history of every launch (``last_trace``).
+        brake: skid after the first contact, outside pulses (``control.brake_forces``).
     """
 
     def __init__(
@@ -497,10 +656,20 @@ class ImpactRig:
         body_b: BodyProxy,
         contact: ContactSpec | None = None,
         timestep: float = 0.001,
+        window: MeasurementWindow | None = None,
+        trace: bool = False,
+        brake: bool = True,
     ) -> None:
         check(body_a.name != body_b.name, "ImpactRig bodies need different names")
+        self.brake = bool(brake)
+        self._control = ControlConfig()
         self.scene = Scene([body_a, body_b], contact=contact, timestep=timestep)
-        self.recorder = ImpactRecorder(self.scene)
+        self.recorder = ImpactRecorder(self.scene, window, trace=trace)
+        # Bounding radii: coasting bodies whose bounding circles are apart and separating
+        # can never touch again, so a launch ends there (the sequence is complete).
+        self._reach = sum(0.5 * math.hypot(b.length, b.width) for b in (body_a, body_b)) + 0.05
+        #: Force history of the last launch's measured sequence (see ``ImpactRecorder.traces``).
+        self.last_trace: np.ndarray | None = None
 
     def launch(
         self,
@@ -510,13 +679,14 @@ class ImpactRig:
         velocity_a: tuple[float, float] | None = None,
         velocity_b: tuple[float, float] | None = None,
     ) -> ImpactMeasurement | None:
-        """Place both bodies, let them coast and measure their first contact episode.
+        """Place both bodies, let them coast and measure their first impact sequence.
 
         Args:
             state_a: pose and speed of body a (velocity along its heading unless
                 ``velocity_a`` is given).
             state_b: pose and speed of body b.
-            max_time: give up after this time [s] if they never touch.
+            max_time: give up after this time [s] if they never touch; a sequence still
+                open then is returned as incomplete.
             velocity_a: explicit velocity of a [m/s], (vx, vy), e.g. a skidding car.
             velocity_b: explicit velocity of b [m/s].
 
@@ -529,6 +699,7 @@ class ImpactRig:
         scene, recorder = self.scene, self.recorder
         scene.reset()
         recorder.reset()
+        self.last_trace = None
         va = velocity_a if velocity_a is not None else _state_velocity(state_a)
         vb = velocity_b if velocity_b is not None else _state_velocity(state_b)
         scene.set_states(
@@ -539,17 +710,37 @@ class ImpactRig:
             np.array([va[1], vb[1]]),
             np.array([state_a.yaw_rate, state_b.yaw_rate]),
         )
-        if scene.data.ncon:
+        if scene.overlaps(0.0):
             raise ValueError("ImpactRig.launch: the bodies overlap at the start")
         n_steps = int(math.ceil(max_time / scene.dt))
         for _ in range(n_steps):
-            recorder.before_step()
-            scene.step()
-            done = recorder.after_step()
+            if self.brake and recorder.touched.any():
+                ctrl = brake_forces(self._control, scene.masses, scene.yaw_inertia, scene.qvel)
+                ctrl[recorder.in_pulse] = 0.0
+                scene.ctrl[:] = ctrl
+            done = scene.step(recorder)
             if done:
-                return done[0]
+                return self._result(done[0])
+            if recorder.has_open_episodes and self._apart_for_good():
+                return self._result(recorder.finish(complete=True)[0])
         leftover = recorder.finish()
-        return leftover[0] if leftover else None
+        return self._result(leftover[0]) if leftover else None
+
+    def _apart_for_good(self) -> bool:
+        """The bounding circles are apart and moving apart.
+
+        Coasting bodies then never meet again; braking only slows them to rest.
+        """
+        q, v = self.scene.qpos, self.scene.qvel
+        rx, ry = q[1, 0] - q[0, 0], q[1, 1] - q[0, 1]
+        wx, wy = v[1, 0] - v[0, 0], v[1, 1] - v[0, 1]
+        return rx * rx + ry * ry > self._reach**2 and rx * wx + ry * wy > 0.0
+
+    def _result(self, measurement: ImpactMeasurement) -> ImpactMeasurement:
+        if self.recorder.trace:
+            key = (measurement.a.entity, measurement.b.entity, measurement.time)
+            self.last_trace = self.recorder.traces.get(key)
+        return measurement
 
 
 def measure_impact(
@@ -562,8 +753,9 @@ def measure_impact(
     shape_b: tuple[float, float] | None = None,
     mass_a: float | None = None,
     mass_b: float | None = None,
+    brake: bool = True,
 ) -> ImpactMeasurement | None:
-    """Launch two road-user proxies at each other once and measure the impact.
+    """Launch two road-user proxies at each other once and measure the impact sequence.
 
     Convenience wrapper of ``ImpactRig``; build a rig yourself for sweeps.
 
@@ -572,11 +764,12 @@ def measure_impact(
         state_a: its pose and speed.
         type_b: type of body b.
         state_b: its pose and speed.
-        contact: contact model.
+        contact: contact model (default: rigid).
         shape_a: (length, width) [m] of a; default shape of the type if None.
         shape_b: (length, width) [m] of b.
         mass_a: [kg]; SPEC mass if None.
         mass_b: [kg].
+        brake: the bodies skid after their first contact (see ``ImpactRig``).
     """
     la, wa = shape_a if shape_a is not None else (None, None)
     lb, wb = shape_b if shape_b is not None else (None, None)
@@ -584,5 +777,6 @@ def measure_impact(
         BodyProxy.of_type("a", type_a, la, wa, mass_a),
         BodyProxy.of_type("b", type_b, lb, wb, mass_b),
         contact=contact,
+        brake=brake,
     )
     return rig.launch(state_a, state_b)

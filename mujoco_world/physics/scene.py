@@ -10,9 +10,9 @@ views ``qpos``, ``qvel`` and ``ctrl`` (columns x, y, yaw).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 from xml.sax.saxutils import quoteattr
 
 import mujoco
@@ -25,6 +25,12 @@ from ethical_planner.road_users import (
     mass_of,
 )
 from ethical_planner.validation import check, check_positive
+from mujoco_world.physics.contact import (
+    MODES,
+    ContactDynamics,
+    dampratio_for_restitution,
+    step_with_substeps,
+)
 from mujoco_world.scenario.road import StaticBox
 from mujoco_world.scenario.spec import Boundary, ContactSpec
 
@@ -50,44 +56,6 @@ NO_ENTITY = -2
 
 # Collision bits: bodies collide with bodies; kerbs stop motor vehicles only, walls all.
 _BODY_BIT, _KERB_BIT, _WALL_BIT = 1, 2, 4
-
-# Measured restitution of two 1475 kg boxes against solref damping ratio
-# (timeconst 0.05 s, 3 and 10 m/s head-on, mean); used to map e to a damping ratio.
-_RESTITUTION_TABLE = np.array(
-    [
-        (0.1, 0.7501),
-        (0.15, 0.6512),
-        (0.2, 0.5708),
-        (0.3, 0.4477),
-        (0.4, 0.3591),
-        (0.5, 0.2937),
-        (0.7, 0.2057),
-        (1.0, 0.1315),
-        (1.5, 0.0730),
-        (2.0, 0.0460),
-        (3.0, 0.0228),
-        (4.0, 0.0135),
-        (6.0, 0.0063),
-    ]
-)
-
-
-def dampratio_for_restitution(e: float) -> float:
-    """MuJoCo solref damping ratio giving a coefficient of restitution ``e``.
-
-    Interpolated (in log e) in a table measured for box-box impacts with a time
-    constant of 0.05 s; other shapes and time constants differ by a few percent, and
-    the measured restitution is reported with every impact anyway.
-
-    Args:
-        e: restitution in [0.0063, 0.75].
-    """
-    table_dr, table_e = _RESTITUTION_TABLE[::-1, 0], _RESTITUTION_TABLE[::-1, 1]
-    check(
-        table_e[0] <= e <= table_e[-1],
-        f"restitution must lie in [{table_e[0]}, {table_e[-1]}], got {e}",
-    )
-    return float(np.interp(math.log(e), np.log(table_e), table_dr))
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,31 +127,45 @@ def scene_xml(
     contact: ContactSpec | None = None,
     timestep: float = TIMESTEP_S,
 ) -> str:
-    """MJCF text of a planar scene (see the module docstring)."""
+    """MJCF text of a planar scene (see the module docstring and ``physics.contact``)."""
     contact = contact or ContactSpec()
+    params = MODES[contact.mode]
     friction = _fmt(contact.friction, 0.005, 0.0001)
+    if params.forces:
+        # MuJoCo only integrates: ContactDynamics finds the contacts (collide2d) and forces.
+        geom_default = 'contype="0" conaffinity="0"'
+    else:
+        geom_default = (
+            f'solref="{_fmt(contact.timeconst, contact.dampratio)}" solimp="{_fmt(*params.solimp)}" '
+            f'friction="{friction}" condim="3"'
+        )
     lines = [
         '<mujoco model="mujoco_world">',
         '  <compiler angle="radian"/>',
         f'  <option timestep="{timestep:.9g}" integrator="implicitfast" gravity="0 0 0"/>',
         "  <default>",
-        f'    <geom solref="{_fmt(contact.timeconst, contact.dampratio)}" friction="{friction}" condim="3"/>',
+        f"    <geom {geom_default}/>",
         '    <joint damping="0" armature="0" limited="false"/>',
         "  </default>",
         "  <worldbody>",
     ]
     for k, wall in enumerate(static_boxes):
         bit = _WALL_BIT if wall.kind is Boundary.WALL else _KERB_BIT
+        half_h = wall.half_height
+        bit, affinity = (0, 0) if params.forces else (bit, 0)
         lines.append(
             f'    <geom name="static_{k}" type="box" '
-            f'pos="{_fmt(wall.center[0], wall.center[1], wall.half_height)}" '
-            f'size="{_fmt(wall.half_length, wall.half_width, wall.half_height)}" '
-            f'euler="0 0 {wall.yaw:.9g}" contype="{bit}" conaffinity="0" rgba="0.6 0.6 0.6 1"/>'
+            f'pos="{_fmt(wall.center[0], wall.center[1], half_h)}" '
+            f'size="{_fmt(wall.half_length, wall.half_width, half_h)}" '
+            f'euler="0 0 {wall.yaw:.9g}" contype="{bit}" conaffinity="{affinity}" rgba="0.6 0.6 0.6 1"/>'
         )
     for body in bodies:
         name = body.name
         half_h = 0.5 * body.height
         affinity = _BODY_BIT | _WALL_BIT | (_KERB_BIT if body.type in MOTORISED_TYPES else 0)
+        contype = _BODY_BIT
+        if params.forces:
+            contype = affinity = 0
         if body.is_round:
             r = body.radius
             geom = f'type="capsule" fromto="0 0 {-half_h + r:.9g} 0 0 {half_h - r:.9g}" size="{r:.9g}"'
@@ -195,11 +177,11 @@ def scene_xml(
             f'      <joint name="{name}_y" type="slide" axis="0 1 0"/>',
             f'      <joint name="{name}_yaw" type="hinge" axis="0 0 1"/>',
             f'      <geom name="{name}_geom" {geom} mass="{body.mass:.9g}" '
-            f'contype="{_BODY_BIT}" conaffinity="{affinity}"/>',
+            f'contype="{contype}" conaffinity="{affinity}"/>',
             "    </body>",
         ]
     lines.append("  </worldbody>")
-    pairs = _restitution_pairs(bodies, contact)
+    pairs = [] if params.forces else _restitution_pairs(bodies, contact)
     if pairs:
         lines += ["  <contact>", *pairs, "  </contact>"]
     lines.append("  <actuator>")
@@ -211,9 +193,15 @@ def scene_xml(
 
 
 def _restitution_pairs(bodies: Sequence[BodyProxy], contact: ContactSpec) -> list[str]:
+    """``<pair>`` elements of the soft mode's constant restitution per pair of types."""
     if not contact.restitution:
         return []
-    table = {frozenset((r.a, r.b)): dampratio_for_restitution(r.e) for r in contact.restitution}
+    table = {
+        frozenset((r.a, r.b)): dampratio_for_restitution(
+            r.e if r.e is not None else r.law(contact.restitution_law).e_high
+        )
+        for r in contact.restitution
+    }
     friction = _fmt(contact.friction, contact.friction, 0.005, 0.0001, 0.0001)
     pairs = []
     for i, a in enumerate(bodies):
@@ -228,6 +216,16 @@ def _restitution_pairs(bodies: Sequence[BodyProxy], contact: ContactSpec) -> lis
     return pairs
 
 
+class StepObserver(Protocol):
+    """Something that watches every physics (sub-)step, like ``impact.ImpactRecorder``."""
+
+    def before_step(self) -> None:
+        """Called before each ``mj_step``."""
+
+    def after_step(self) -> list:
+        """Called after each ``mj_step``; returns what ended in it."""
+
+
 class Scene:
     """A compiled planar scene with ids and addresses looked up once.
 
@@ -240,6 +238,7 @@ class Scene:
         masses: (n,) [kg]. yaw_inertia: (n,) [kg m^2].
         geom_entity: (ngeom,) entity index of every geom, ``STATIC`` for walls and kerbs.
         static_kind: "wall", "kerb" or "static" (no static geoms).
+        static_boxes: the walls and kerbs.
         dt: physics time step [s].
     """
 
@@ -301,6 +300,35 @@ class Scene:
         self.types = tuple(b.type for b in self.bodies)
         self.names = tuple(names)
         self.static_kind = static_boxes[0].kind.value if static_boxes else "static"
+        self.static_boxes = tuple(static_boxes)
+        self.dynamics = ContactDynamics(self)
+
+    @property
+    def contact_possible(self) -> bool:
+        """Whether a contact could have pressed during the last step.
+
+        Force modes: some pair was within the look-ahead before it; soft mode: MuJoCo
+        reported contacts. False means no body touched anything in that step.
+        """
+        if self.dynamics.parameters.forces:
+            return self.dynamics.near
+        return self.data.ncon > 0
+
+    def overlaps(self, tolerance: float = 1e-6) -> list[tuple[int, int]]:
+        """Pairs of entities (``STATIC`` for walls and kerbs) overlapping deeper than ``tolerance`` [m]."""
+        if self.dynamics.parameters.forces:
+            found = self.dynamics.contacts()
+            bad = found.dist < -tolerance
+            pairs = zip(found.a[bad].tolist(), found.b[bad].tolist(), strict=True)
+        else:
+            data = self.data
+            if not data.ncon:
+                return []
+            e1 = self.geom_entity[data.contact.geom1]
+            e2 = self.geom_entity[data.contact.geom2]
+            bad = (e1 != NO_ENTITY) & (e2 != NO_ENTITY) & (e1 != e2) & (data.contact.dist < -tolerance)
+            pairs = zip(e1[bad].tolist(), e2[bad].tolist(), strict=True)
+        return list(dict.fromkeys((int(a), int(b)) for a, b in pairs))
 
     @property
     def time(self) -> float:
@@ -324,15 +352,25 @@ class Scene:
         self.qpos[:, 0], self.qpos[:, 1], self.qpos[:, 2] = values[0], values[1], values[2]
         self.qvel[:, 0], self.qvel[:, 1], self.qvel[:, 2] = values[3], values[4], values[5]
         mujoco.mj_forward(self.model, self.data)
+        self.dynamics.invalidate()
 
     def reset(self) -> None:
-        """Reset time, states and controls to zero."""
+        """Reset time, states, controls and contact states to zero."""
         mujoco.mj_resetData(self.model, self.data)
+        self.dynamics.reset()
         # The views stay valid: mj_resetData keeps the buffers.
 
-    def step(self) -> None:
-        """Advance the physics by one time step."""
-        mujoco.mj_step(self.model, self.data)
+    def step(self, observer: StepObserver | None = None) -> list:
+        """Advance the physics by one time step ``dt`` (in sub-steps during an impact).
+
+        Args:
+            observer: gets ``before_step()`` / ``after_step()`` around every ``mj_step``
+                (e.g. an ``ImpactRecorder``); ``after_step`` results are returned.
+
+        Returns:
+            The concatenated results of ``observer.after_step()`` (empty without one).
+        """
+        return step_with_substeps(self, self.dynamics.prepare(), observer)
 
     def speeds(self) -> np.ndarray:
         """Planar speed of every body [m/s], shape (n,)."""

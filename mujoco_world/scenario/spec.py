@@ -18,6 +18,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
+from ethical_planner.impulse import RestitutionLaw
 from ethical_planner.records import errors_in, from_mapping, read_toml
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, RoadUserType
 from ethical_planner.validation import check, check_finite, check_non_negative, check_positive, parse_enum
@@ -82,6 +83,7 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "contact.timeconst": (0.002, 1.0, "s"),
     "contact.dampratio": (0.1, 100.0, "-"),
     "contact.friction": (0.0, 2.0, "-"),
+    "restitution.speed_scale": (0.1, 100.0, "m/s"),
     "sensor.range": (1.0, 2000.0, "m"),
 }
 #: Most road users of one scenario (``Scenario.road_users``).
@@ -533,56 +535,136 @@ class EgoSpec:
         )
 
 
+class ContactMode(StrEnum):
+    """How bodies touch (see ``mujoco_world.physics.contact``).
+
+    ``rigid``: stiff contacts resolved with sub-steps during impacts; restitution follows
+    the contact's ``RestitutionLaw`` at the contact point. The mode for validating
+    harm-model inputs (rigid-body impulse mechanics within a few percent).
+    ``crush``: deformable fronts, sides and rears (force-deflection per body region,
+    softer pedestrians and cyclists); crash pulses of ~0.1 s with the peak force
+    mid-pulse and 0.5-0.7 m of crush at 56 km/h into a wall.
+    ``soft``: the near-plastic ``solref`` contact of wave 1 (``timeconst``, ``dampratio``);
+    bodies sink into each other and it under-measures offset impacts: kept for comparison only.
+    """
+
+    RIGID = "rigid"
+    CRUSH = "crush"
+    SOFT = "soft"
+
+
 @dataclass(frozen=True, slots=True)
 class RestitutionSpec:
-    """Coefficient of restitution between two road-user types.
+    """Restitution between two road-user types, overriding the contact's default law.
+
+    Either a constant ``e``, or any of ``e_high``, ``e_low``, ``speed_scale`` (the
+    others from the default law); see ``ethical_planner.impulse.RestitutionLaw``.
 
     Attributes:
         a: first type. b: second type (order does not matter).
-        e: restitution in [0.01, 0.75] (mapped to a MuJoCo damping ratio).
+        e: constant restitution in [0, 1], or None.
+        e_high: restitution at high closing speed, or None.
+        e_low: restitution at low closing speed, or None.
+        speed_scale: [m/s], or None.
     """
 
     a: RoadUserType
     b: RoadUserType
-    e: float
+    e: float | None = None
+    e_high: float | None = None
+    e_low: float | None = None
+    speed_scale: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("a", "b"):
             kind = parse_enum(RoadUserType, getattr(self, name), "road-user type", f"restitution.{name}")
             object.__setattr__(self, name, kind)
-        check_finite("restitution", e=self.e)
+        check_finite(
+            "restitution", e=self.e, e_high=self.e_high, e_low=self.e_low, speed_scale=self.speed_scale
+        )
+        law = (self.e_high, self.e_low, self.speed_scale)
         check(
-            0.01 <= self.e <= 0.75,
-            f"restitution.e must lie in [0.01, 0.75] (MuJoCo soft contacts), got {self.e}",
+            (self.e is None) != all(v is None for v in law),
+            "restitution: give either e (a constant) or some of e_high, e_low, speed_scale",
+        )
+        for name in ("e", "e_high", "e_low"):
+            value = getattr(self, name)
+            check(value is None or 0.0 <= value <= 1.0, f"restitution.{name} must lie in [0, 1], got {value}")
+        check_positive("restitution", speed_scale=self.speed_scale)
+        check_plausible("restitution", self)
+
+    def law(self, default: RestitutionLaw) -> RestitutionLaw:
+        """The pair's restitution law, filling unset fields from ``default``."""
+        if self.e is not None:
+            return RestitutionLaw.constant(self.e)
+        return RestitutionLaw(
+            default.e_high if self.e_high is None else self.e_high,
+            default.e_low if self.e_low is None else self.e_low,
+            default.speed_scale if self.speed_scale is None else self.speed_scale,
         )
 
 
 @dataclass(frozen=True, slots=True)
 class ContactSpec:
-    """Contact model between bodies.
+    """Contact model between bodies (and between bodies and walls).
 
     Attributes:
-        timeconst: solref time constant [s]; sets pulse length and crush depth.
-        dampratio: solref damping ratio; >= 4 gives near-plastic impacts (e ~ 0.01).
-        friction: sliding friction between bodies.
-        restitution: per pair of types; overrides ``dampratio`` for those pairs.
+        mode: ``rigid`` (default), ``crush`` or ``soft`` (see ``ContactMode``).
+        friction: sliding friction between bodies (Coulomb); the planner's planar impulse
+            model uses the same value as its largest impulse ratio.
+        restitution_law: restitution against the normal closing speed at the contact
+            point, for every pair without an entry in ``restitution`` (rigid and crush).
+        restitution: per pair of types.
+        timeconst: ``soft`` mode only: solref time constant [s] (pulse length, sinking depth).
+        dampratio: ``soft`` mode only: solref damping ratio; >= 4 gives e ~ 0.01. In soft
+            mode ``restitution`` entries give a constant e per pair (their ``e`` or
+            ``e_high``) and the law is not used.
     """
 
+    mode: ContactMode = ContactMode.RIGID
+    friction: float = 0.3
+    restitution_law: RestitutionLaw = field(default_factory=RestitutionLaw)
+    restitution: tuple[RestitutionSpec, ...] = ()
     timeconst: float = 0.05
     dampratio: float = 4.0
-    friction: float = 0.3
-    restitution: tuple[RestitutionSpec, ...] = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "mode", parse_enum(ContactMode, self.mode, "contact mode", "contact.mode"))
         check_positive("contact", timeconst=self.timeconst, dampratio=self.dampratio)
         check_non_negative("contact", friction=self.friction)
         check_plausible("contact", self)
         check(self.timeconst >= 0.002, "contact.timeconst must be >= 0.002 s (2 time steps)")
+        check(
+            isinstance(self.restitution_law, RestitutionLaw),
+            "contact.restitution_law must be a table with e_high, e_low, speed_scale",
+        )
+        object.__setattr__(self, "restitution", tuple(self.restitution))
         seen = set()
         for r in self.restitution:
             key = frozenset((r.a, r.b))
             check(key not in seen, f"contact.restitution lists {r.a.value}-{r.b.value} twice")
             seen.add(key)
+        # Every restitution must be reachable in this mode (its table of measured values).
+        from mujoco_world.physics.contact import restitution_range
+
+        low, high = restitution_range(self.mode)
+        laws = [("restitution_law", self.restitution_law)]
+        laws += [(f"restitution[{k}]", r.law(self.restitution_law)) for k, r in enumerate(self.restitution)]
+        for name, law in laws:
+            for value in (law.e_high, law.e_low):
+                check(
+                    low <= value <= high,
+                    f"contact.{name}.e must lie in [{low:g}, {high:g}] in {self.mode.value} mode, "
+                    f"got {value:g}",
+                )
+
+    def law_for(self, a: RoadUserType | str, b: RoadUserType | str) -> RestitutionLaw:
+        """Restitution law between types ``a`` and ``b`` (a wall or kerb: ``b = "static"``)."""
+        key = {a, b}
+        for r in self.restitution:
+            if {r.a, r.b} == key:
+                return r.law(self.restitution_law)
+        return self.restitution_law
 
 
 @dataclass(frozen=True, slots=True)

@@ -583,3 +583,25 @@ def test_area_scheme_keys_cover_every_bin():
             assert scheme is AreaScheme.NONE
             continue
         assert len(bins.keys) == len(H._CLOCK_BY_CODE if bins.width < 1 else H._REDUCED_BY_CODE)
+
+
+def test_collision_harm_with_the_planar_delta_v_model():
+    """The planar model's delta-v enters the harm; it needs both footprints."""
+    from ethical_planner.impulse import RestitutionLaw, planar_impulse
+
+    kwargs = dict(ego_mass=1500.0, ego_vel=(12.0, 0.0), ego_pos=(0.0, 0.0), ego_yaw=0.0, obs_mass=1200.0,
+                  obs_vel=(0.0, 6.0), obs_pos=(3.3, 1.0), obs_yaw=math.pi / 2,
+                  obs_unprotected=np.array(False))  # fmt: skip
+    law = RestitutionLaw.constant(0.1)
+    result = collision_harm(**kwargs, delta_v_model="planar_impulse", restitution=law, impulse_ratio=0.3,
+                            ego_shape=(4.5, 1.8), obs_shape=(4.5, 1.8))  # fmt: skip
+    direct = planar_impulse(1500.0, (0.0, 0.0), 0.0, 4.5, 1.8, (12.0, 0.0), 1200.0, (3.3, 1.0), math.pi / 2,
+                            4.5, 1.8, (0.0, 6.0), law, 0.3)  # fmt: skip
+    assert float(result.dv_ego) == pytest.approx(float(direct.dv_a))
+    assert float(result.harm_obs) == pytest.approx(float(harm("reduced_sym", direct.dv_b, result.obs_angle)))
+    eq1 = collision_harm(**kwargs)
+    assert float(result.dv_ego) < float(eq1.dv_ego)  # glancing: less than the common velocity
+    with pytest.raises(ValueError, match="planar impulse model needs ego_shape"):
+        collision_harm(**kwargs, delta_v_model="planar_impulse")
+    with pytest.raises(ValueError, match="allowed: eq1, planar_impulse"):
+        collision_harm(**kwargs, delta_v_model="eq7")

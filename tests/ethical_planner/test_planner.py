@@ -154,34 +154,35 @@ def test_bad_planner_arguments():
         Planner({"weights": {}}, env)
 
 
-def test_calibrated_delta_v_changes_the_harm_the_planner_computes(tmp_path):
-    from ethical_planner.dv_correction import DeltaVCorrection
+def test_planar_delta_v_model_changes_the_harm_the_planner_computes():
+    """Overtaking a cyclist: a brush at the cyclist's side transfers less than Eq. 1's
+    common velocity, and the planar model's harm follows its delta-v (pedestrian-style
+    harm of the cyclist is monotone in delta-v)."""
+    from ethical_planner.harm import collision_harm
+    from ethical_planner.impulse import planar_impulse
 
-    identity = DeltaVCorrection.identity()
-    halved = DeltaVCorrection(
-        identity.angle_edges_deg,
-        identity.offset_edges,
-        tuple(tuple(0.5 for _ in row) for row in identity.factors),
-    )
-    path = tmp_path / "calibration.json"
-    halved.save(path)
     situation = overtaking_cyclist(cyclist_ahead=8.0)
     # Risk-blind and without R_max, so both plans are the same candidate.
     base = preset("standard").with_overrides({"risk": {"max_acceptable_risk": 1.0}})
     plain = Planner(base, situation.environment).plan(situation.ego, situation.road_users)
-    calibrated_config = base.with_overrides({"risk": {"delta_v_correction": str(path)}})
-    calibrated = Planner(calibrated_config, situation.environment).plan(situation.ego, situation.road_users)
-    assert calibrated.chosen_index == plain.chosen_index
-    cyclist_plain, cyclist_calibrated = plain.road_users[0], calibrated.road_users[0]
-    assert cyclist_plain.collision_probability == pytest.approx(cyclist_calibrated.collision_probability)
-    assert 0 < cyclist_calibrated.harm < cyclist_plain.harm  # half the delta-v, less harm
-    assert cyclist_calibrated.ego_harm < cyclist_plain.ego_harm
-
-
-def test_missing_calibration_file_is_a_clear_error(tmp_path):
-    config = preset("ethical").with_overrides({"risk": {"delta_v_correction": str(tmp_path / "nope.json")}})
-    with pytest.raises(ValueError, match="risk.delta_v_correction: cannot read"):
-        Planner(config, overtaking_cyclist().environment)
+    planar_config = base.with_overrides({"risk": {"delta_v_model": "planar_impulse"}})
+    planar = Planner(planar_config, situation.environment).plan(situation.ego, situation.road_users)
+    assert planar.chosen_index == plain.chosen_index
+    cyclist_plain, cyclist_planar = plain.road_users[0], planar.road_users[0]
+    assert cyclist_plain.collision_probability == pytest.approx(cyclist_planar.collision_probability)
+    assert cyclist_planar.harm != pytest.approx(cyclist_plain.harm, rel=1e-3)
+    # The harm is the planar model's at the same states (checked on one pair of states).
+    ego, cyclist = situation.ego, situation.road_users[0]
+    other = cyclist.state
+    args = dict(ego_mass=1475.0, ego_vel=ego.velocity, ego_pos=(ego.x, ego.y), ego_yaw=ego.yaw,
+                obs_mass=cyclist.mass, obs_vel=other.velocity, obs_pos=(other.x, other.y),
+                obs_yaw=other.yaw, obs_unprotected=np.array(True))  # fmt: skip
+    result = collision_harm(**args, delta_v_model="planar_impulse", ego_shape=(4.508, 1.61),
+                            obs_shape=(cyclist.shape.length, cyclist.shape.width))  # fmt: skip
+    direct = planar_impulse(1475.0, (ego.x, ego.y), ego.yaw, 4.508, 1.61, ego.velocity, cyclist.mass,
+                            (cyclist.state.x, cyclist.state.y), cyclist.state.yaw, cyclist.shape.length,
+                            cyclist.shape.width, cyclist.state.velocity, friction=0.3)  # fmt: skip
+    assert float(result.dv_obs) == pytest.approx(float(direct.dv_b))
 
 
 def test_principles_of_the_chosen_plan_use_the_papers_risk_set():
@@ -384,3 +385,8 @@ def test_the_readme_predictor_example_runs_and_its_registration_works(monkeypatc
     )
     assert by_name.predictor.name == "cautious"
     assert "cautious" in PREDICTORS
+
+
+def test_old_correction_option_is_rejected_by_name():
+    with pytest.raises(ValueError, match="unknown key 'risk.delta_v_correction'"):
+        preset("ethical").with_overrides({"risk": {"delta_v_correction": "calibration.json"}})

@@ -55,7 +55,9 @@ def test_rows_from_runs(runs):
     assert head_on["angle_deg"] == pytest.approx(180.0)
     assert head_on["closing_speed"] == pytest.approx(13.0)
     assert head_on["class"] == "central_collinear"
-    assert head_on["dv_measured_a"] == pytest.approx(head_on["dv_predicted_a"], rel=0.05)
+    e = head_on["restitution"]
+    assert head_on["dv_measured_a"] == pytest.approx(head_on["dv_predicted_a"] * (1 + e), rel=0.01)
+    assert head_on["dv_measured_a"] == pytest.approx(head_on["dv_planar_a"], rel=0.02)
     assert {r["class"] for r in rows} == {"central_collinear", "offset"}
 
 
@@ -84,6 +86,10 @@ def test_cli_from_runs(runs, tmp_path, capsys):
     assert main(["impacts", "--from-runs", str(runs), "--out", str(out), "--no-plots"]) == 0
     assert (out / "impacts.csv").exists() and (out / "report.md").exists()
     assert "central_collinear" in capsys.readouterr().out
+    report = (out / "report.md").read_text()
+    # One line per collision with measured delta-v and harm against both models.
+    assert "## Collisions" in report and report.count("| a/seed0[0] |") == 1
+    assert "harm planar a / b" in report
 
 
 def test_cli_from_runs_without_collisions(tmp_path, capsys):

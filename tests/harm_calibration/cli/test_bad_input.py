@@ -1,7 +1,7 @@
 # ruff: noqa: E501 - the table keeps one case per line
 """Bad input never becomes a traceback or a silent result: exit code 2, the field or file named.
 
-One table over command-line options, scenario TOML, planner TOML, calibration JSON,
+One table over command-line options, scenario TOML, planner TOML (with the delta-v model),
 refit CSV and run-index rows. Every case runs ``etp`` in this process with the
 simulation replaced by a function that fails the test: bad input must be refused
 before anything is simulated.
@@ -18,7 +18,6 @@ SCENARIO = HEAD_ON.format(name="short", duration=2.0)
 GOOD_CSV = (
     "dv,mais3,area\n5,0,front\n12,1,side\n20,0,rear\n25,1,front\n8,1,front\n15,0,side\n30,1,rear\n3,0,rear\n"
 )
-GOOD_CALIBRATION = {"angle_edges_deg": [0, 180], "offset_edges": [0, 1], "factors": [[0.8]]}
 
 
 def _scenario(old: str = "", new: str = "", *, extra: str = "") -> str:
@@ -32,10 +31,6 @@ def _user(**fields: str) -> str:
     """A third road user whose fields (TOML values) override a scripted car's."""
     values = {"name": '"third"', "type": '"car"', "s0": "50.0"} | fields
     return "\n[[road_users]]\n" + "".join(f"{k} = {v}\n" for k, v in values.items())
-
-
-def _calibration(**changes) -> str:
-    return json.dumps(GOOD_CALIBRATION | changes)
 
 
 def _csv(*rows: str, header: str = "dv,mais3,area") -> str:
@@ -113,6 +108,10 @@ CASES = [
     ("lateral-huge", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra=_user(behaviour='{ lateral = [[1.0, 500.0]] }'))}, "{d}/s.toml: road_users[2].behaviour.lateral must lie in [-20, 20] m"),
     ("friction", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra="\n[contact]\nfriction = 5.0\n")}, "{d}/s.toml: contact.friction must lie in"),
     ("restitution", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra='\n[contact]\nrestitution = [{ a = "car", b = "car", e = 2.0 }]\n')}, "{d}/s.toml: contact.restitution[0].e must lie in"),
+    ("contact-mode", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra='\n[contact]\nmode = "jelly"\n')}, "{d}/s.toml: contact.mode: unknown contact mode 'jelly'"),
+    ("restitution-law", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra="\n[contact.restitution_law]\ne_low = 1.5\n")}, "{d}/s.toml: contact.restitution_law.e_low must lie in [0, 1]"),
+    ("restitution-scale-pair", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra='\n[contact]\nrestitution = [{ a = "car", b = "truck", speed_scale = 1e6 }]\n')}, "{d}/s.toml: contact.restitution[0].speed_scale must lie in [0.1, 100] m/s"),
+    ("restitution-both", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra='\n[contact]\nrestitution = [{ a = "car", b = "truck", e = 0.1, e_low = 0.3 }]\n')}, "give either e (a constant) or some of e_high, e_low, speed_scale"),
     ("sensor-range", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra="\n[sensor]\nrange = -5.0\n")}, "{d}/s.toml: sensor.range"),
     ("scenario-folder", ["run", "{d}/folder.toml"], {"folder.toml/x": ""}, "cannot read scenario file {d}/folder.toml"),
     # ------------------------------------------------------------------- planner TOML
@@ -133,15 +132,13 @@ CASES = [
     ("config-not-utf8", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": b"[weights]\n# \xff\n"}, "{d}/p.toml: not UTF-8 text"),
     ("config-missing", ["run", "{d}/s.toml", "--config", "{d}/nope.toml"], {"s.toml": SCENARIO}, "cannot read planner configuration file {d}/nope.toml"),
     ("desired-speed", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": "desired_speed = -3.0\n"}, "{d}/p.toml: desired_speed"),
-    # --------------------------------------------------------------- calibration JSON
-    ("factors-int", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": '[risk]\ndelta_v_correction = "c.json"\n', "c.json": _calibration(factors=5)}, "risk.delta_v_correction: {d}/c.json: DeltaVCorrection.factors must be a list of rows"),
-    ("factors-zero", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": '[risk]\ndelta_v_correction = "c.json"\n', "c.json": _calibration(factors=[[0.0]])}, "risk.delta_v_correction: {d}/c.json: DeltaVCorrection.factors must be finite and > 0"),
-    ("factors-shape", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": '[risk]\ndelta_v_correction = "c.json"\n', "c.json": _calibration(factors=[[1.0, 1.0]])}, "risk.delta_v_correction: {d}/c.json: DeltaVCorrection.factors needs shape (1, 1)"),
-    ("calibration-key", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": '[risk]\ndelta_v_correction = "c.json"\n', "c.json": _calibration(scale=2)}, "risk.delta_v_correction: {d}/c.json: DeltaVCorrection: unknown keys ['scale']"),
-    ("calibration-edges", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": '[risk]\ndelta_v_correction = "c.json"\n', "c.json": _calibration(angle_edges_deg=[0, 90])}, "risk.delta_v_correction: {d}/c.json: DeltaVCorrection.angle_edges_deg must increase from 0 to 180"),
-    ("calibration-list", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": '[risk]\ndelta_v_correction = "c.json"\n', "c.json": "[1, 2]"}, "risk.delta_v_correction: {d}/c.json: DeltaVCorrection: expected a JSON object, got list"),
-    ("calibration-not-json", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": '[risk]\ndelta_v_correction = "c.json"\n', "c.json": "{factors"}, "risk.delta_v_correction: {d}/c.json: not valid JSON"),
-    ("calibration-missing", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": '[risk]\ndelta_v_correction = "c.json"\n'}, "risk.delta_v_correction: cannot read"),
+    # ------------------------------------------------- delta-v model (planner TOML)
+    ("dv-model", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": '[risk]\ndelta_v_model = "bogus"\n'}, "{d}/p.toml: risk.delta_v_model: unknown delta-v model 'bogus'"),
+    ("dv-correction-retired", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": '[risk]\ndelta_v_correction = "c.json"\n'}, "{d}/p.toml: unknown key 'risk.delta_v_correction'"),
+    ("impulse-ratio", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": "[risk]\nimpulse_ratio = -0.3\n"}, "{d}/p.toml: risk.impulse_ratio must be >= 0"),
+    ("restitution-high", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": "[risk.restitution_law]\ne_high = 1.5\n"}, "restitution_law.e_high must lie in [0, 1]"),
+    ("restitution-scale", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": "[risk.restitution_law]\nspeed_scale = 0.0\n"}, "restitution_law.speed_scale must be > 0"),
+    ("restitution-key", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": "[risk.restitution_law]\ne_mid = 0.2\n"}, "{d}/p.toml: unknown key 'risk.restitution_law.e_mid'"),
     # ------------------------------------------------------------------------ refit CSV
     ("csv-missing-column", ["refit-harm", "{d}/r.csv"], {"r.csv": _csv("5,front", header="dv,area")}, "{d}/r.csv: neither crash records"),
     ("csv-dv-negative", ["refit-harm", "{d}/r.csv"], {"r.csv": GOOD_CSV + "-1,0,front\n"}, "{d}/r.csv row 9: dv must be finite and >= 0"),

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from ethical_planner.dv_correction import DeltaVCorrection
 from harm_calibration.cli import build_parser, main
 from mujoco_world.storage.run_folder import run_id
 from mujoco_world.storage.run_index import read_index
@@ -112,12 +111,12 @@ def test_read_only_out_fails_before_simulating(tmp_path, capsys, short_scenario)
 
 def test_config_overrides_apply_to_run_and_demo(tmp_path, capsys):
     scenario = write_scenario(tmp_path, FOLLOW, "follow", duration=0.5)
-    halved = DeltaVCorrection((0.0, 180.0), (0.0, 1.0), ((0.5,),))
-    (tmp_path / "cfg").mkdir()
-    halved.save(tmp_path / "cfg" / "half.json")
-    config = tmp_path / "cfg" / "calibrated.toml"
-    # the correction's path is relative to the TOML file, not to the working directory
-    config.write_text('[risk]\ndelta_v_correction = "half.json"\n', encoding="utf-8")
+    config = tmp_path / "calibrated.toml"
+    # the planar impulse model with e = 0.4: a rear-end delta-v 1.4 times Eq. 1's
+    config.write_text(
+        '[risk]\ndelta_v_model = "planar_impulse"\nrestitution_law = {e_high = 0.4, e_low = 0.4}\n',
+        encoding="utf-8",
+    )
     slow = tmp_path / "slow.toml"
     slow.write_text('name = "crawl"\ndesired_speed = 2.0\n', encoding="utf-8")
 
@@ -133,8 +132,8 @@ def test_config_overrides_apply_to_run_and_demo(tmp_path, capsys):
         "ethical+calibrated",
         "crawl",
     )
-    # half the delta-v lowers the planned harm, hence the risk; a 2 m/s target slows the ego
-    assert 0 < calibrated["max_risk"]["ego"] < plain["max_risk"]["ego"]
+    # another delta-v model plans with other harms (and trajectories); a 2 m/s target slows the ego
+    assert 0 < plain["max_risk"]["ego"] != calibrated["max_risk"]["ego"] > 0
     assert free["progress"] - 10.0 > 20.0 > 18.0 > crawl["progress"] - 10.0  # 13.9 vs 2 m/s wanted
     demo = ["demo", "--scenarios", scenario, "--planners", "ethical,standard", "--config", str(config)]
     batch = _json_out(
@@ -149,7 +148,7 @@ def test_config_overrides_apply_to_run_and_demo(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ('[risk]\ndelta_v_correction = "missing.json"\n', "risk.delta_v_correction: cannot read"),
+        ('[risk]\ndelta_v_model = "bogus"\n', "risk.delta_v_model"),
         ("[risk]\nmax_acceptable_risk = 2.0\n", "max_acceptable_risk must lie in [0, 1]"),
         ("[weights]\nbogus = 1\n", "weights.bogus"),
         ("[risk\n", "not valid TOML"),
