@@ -205,11 +205,12 @@ def test_sandwich_standard_errors_against_a_direct_computation(tmp_path):
 
 
 def test_refit_reads_the_csv_that_etp_impacts_writes(tmp_path, capsys):
-    grid = GridSpec((6.0, 12.0, 18.0), (0.0, 90.0, 180.0), (0.0,), ("car",), ("plastic",))
+    # Offset 0.5 gives side hits (rigid contact: at offset 0 and 90 deg the front corners meet).
+    grid = GridSpec((6.0, 12.0, 18.0), (0.0, 90.0, 180.0), (0.0, 0.5), ("car",), ("default",))
     run_sweep(grid.cases(), tmp_path / "impacts.csv", workers=1, progress=False)
     assert main(["refit-harm", str(tmp_path / "impacts.csv"), "--inputs", "measured", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert data["n_records"] == 18 and data["converged"]
+    assert data["n_records"] == 36 and data["converged"]
     for name, value in {"c0": -4.457, "c1": 0.177, "area_side": 0.244, "area_rear": -0.431}.items():
         assert data["parameters"][name]["estimate"] == pytest.approx(value, abs=1e-6)
     assert main(["refit-harm", str(tmp_path / "impacts.csv")]) == 0
