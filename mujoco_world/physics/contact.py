@@ -48,7 +48,9 @@ import shapely
 from ethical_planner.impulse import RestitutionLaw
 from ethical_planner.road_users import MOTORISED_TYPES, UNPROTECTED_TYPES, RoadUserType
 from mujoco_world.physics.collide2d import Box2D, Collider, Contacts
-from mujoco_world.scenario.spec import Boundary, ContactMode
+from mujoco_world.scenario.spec import FORCE_RESTITUTION as _FORCE_RESTITUTION
+from mujoco_world.scenario.spec import SOFT_RESTITUTION_TABLE as _SOFT_TABLE
+from mujoco_world.scenario.spec import Boundary, ContactMode, restitution_range
 
 if TYPE_CHECKING:  # pragma: no cover
     from mujoco_world.physics.scene import Scene
@@ -89,22 +91,11 @@ class ModeParameters:
     table: tuple[tuple[float, float], ...] = ()
 
 
-# Measured restitution of two 1475 kg boxes head-on against the solref damping ratio at
-# time constant 0.05 s (soft mode; regenerate with ``python benchmarks/restitution_table.py``).
-_SOFT_TABLE = (
-    (0.1, 0.7501), (0.15, 0.6512), (0.2, 0.5708), (0.3, 0.4477), (0.4, 0.3591), (0.5, 0.2937),
-    (0.7, 0.2057), (1.0, 0.1315), (1.5, 0.0730), (2.0, 0.0460), (3.0, 0.0228), (4.0, 0.0135),
-    (6.0, 0.0063),
-)  # fmt: skip
-
 MODES: dict[ContactMode, ModeParameters] = {
     ContactMode.SOFT: ModeParameters(substeps=1, forces=False, table=_SOFT_TABLE),
     ContactMode.RIGID: ModeParameters(substeps=10, forces=True),
     ContactMode.CRUSH: ModeParameters(substeps=4, forces=True),
 }
-
-#: Restitution a force mode can produce.
-_FORCE_RESTITUTION = (0.01, 0.9)
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,14 +164,6 @@ def hunt_crossley_damping(e: float, closing_speed: float) -> float:
     e = min(max(float(e), _FORCE_RESTITUTION[0]), _FORCE_RESTITUTION[1])
     u = float(np.interp(math.log(e), np.log(_HC_E[::-1]), _HC_U[::-1]))
     return u / max(float(closing_speed), _MIN_ONSET_SPEED)
-
-
-def restitution_range(mode: ContactMode) -> tuple[float, float]:
-    """Smallest and largest restitution a contact mode can produce."""
-    table = MODES[mode].table
-    if not table:
-        return _FORCE_RESTITUTION
-    return table[-1][1], table[0][1]
 
 
 def restitution_dampratio(e: float | np.ndarray, mode: ContactMode = ContactMode.SOFT) -> np.ndarray:

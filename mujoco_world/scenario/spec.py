@@ -553,6 +553,24 @@ class ContactMode(StrEnum):
     SOFT = "soft"
 
 
+# Measured restitution of two 1475 kg boxes head-on against the solref damping ratio at
+# time constant 0.05 s (soft mode; regenerate with ``python benchmarks/restitution_table.py``).
+SOFT_RESTITUTION_TABLE = (
+    (0.1, 0.7501), (0.15, 0.6512), (0.2, 0.5708), (0.3, 0.4477), (0.4, 0.3591), (0.5, 0.2937),
+    (0.7, 0.2057), (1.0, 0.1315), (1.5, 0.0730), (2.0, 0.0460), (3.0, 0.0228), (4.0, 0.0135),
+    (6.0, 0.0063),
+)  # fmt: skip
+#: Restitution the force modes (rigid, crush) can produce.
+FORCE_RESTITUTION = (0.01, 0.9)
+
+
+def restitution_range(mode: ContactMode | str) -> tuple[float, float]:
+    """Smallest and largest restitution a contact mode can produce."""
+    if ContactMode(mode) is ContactMode.SOFT:
+        return SOFT_RESTITUTION_TABLE[-1][1], SOFT_RESTITUTION_TABLE[0][1]
+    return FORCE_RESTITUTION
+
+
 @dataclass(frozen=True, slots=True)
 class RestitutionSpec:
     """Restitution between two road-user types, overriding the contact's default law.
@@ -645,8 +663,6 @@ class ContactSpec:
             check(key not in seen, f"contact.restitution lists {r.a.value}-{r.b.value} twice")
             seen.add(key)
         # Every restitution must be reachable in this mode (its table of measured values).
-        from mujoco_world.physics.contact import restitution_range
-
         low, high = restitution_range(self.mode)
         laws = [("restitution_law", self.restitution_law)]
         laws += [(f"restitution[{k}]", r.law(self.restitution_law)) for k, r in enumerate(self.restitution)]
