@@ -1,11 +1,15 @@
-"""The learned predictor: a small torch network that outputs a bivariate normal per step.
+"""The learned predictor: a small torch network whose prediction is a Gaussian scale mixture per step.
 
-Like the paper's WaleNet, it gives each road user one Gaussian position per future
-step, so the planner's collision probability consumes it unchanged. A mixture would
-need its collision probability as the weighted sum of its components'; the planner
-integrates one Gaussian, and a network trained on the Gaussian negative
-log-likelihood directly already fits the best single Gaussian to the data (what a
-moment-matched mixture would approximate), so the model predicts one.
+The network gives each road user one bivariate normal per future step (mean and
+covariance), like the paper's WaleNet. Its errors on held-out locations are
+heavier-tailed than one Gaussian: a single covariance scale can match the 1-sigma
+or the 2-sigma coverage, never both. So the calibrated prediction is a mixture of K
+Gaussians (K = 2 shipped) with the network's mean and shape: component k is
+N(mu, v_k Sigma) with weight w_k, and (w_k, v_k) are fitted by maximum likelihood
+per type group, motion state (standing below ``MOVING_SPEED``, moving) and step on
+validation locations (``harm_calibration.predictor.train.fit_mixture``). The planner's
+collision probability of a mixture is the weighted sum of its components'
+(``ethical_planner.risk.prediction_collision_probability``).
 
 Input per road user (in its own frame: origin at its centre, x along its heading):
 its type group, length and width, and its past 2 s sampled every 0.2 s (positions,
@@ -15,12 +19,15 @@ oldest known state, and the network is told how much of its history is real (it 
 trained on tracks that appear late, so it has seen such windows).
 
 Output per future step (0.2 s .. 4 s every 0.2 s): the mean as a correction of the
-constant-velocity position, and a Cholesky factor of the covariance; then each
-covariance is multiplied by a per-group, per-step factor fitted on a validation
-split (recalibration, see ``harm_calibration.predictor``). Times between steps are
-interpolated linearly (mean and covariance); t = 0 is the observed state with the
-config's ``sigma0`` uncertainty; beyond 4 s the mean continues at the last predicted
-velocity and the covariance grows with t^2.
+constant-velocity position, and a Cholesky factor of the covariance Sigma; Sigma's
+eigenvalues are raised to ``RESOLUTION_FLOOR`` (the recordings' 10 cm accuracy) and
+its size (trace / 2) to its running maximum along the horizon; then the mixture's
+components are v_k Sigma, all scaled alike where needed so that the mixture's size
+sum_k w_k v_k trace(Sigma) / 2 never shrinks along the horizon either (before the
+planner's covariance floor, which raises each component on its own). Times between
+steps are interpolated linearly (mean, weights, covariances apart); t = 0 is the
+observed state with the config's ``sigma0`` uncertainty; beyond 4 s the mean continues
+at the last predicted velocity and the covariances grow with t^2.
 
 torch is imported only when a model is loaded (extra ``[learned]``); its intra-op
 threads are set explicitly (``PredictionConfig.torch_threads``) so that a process
@@ -43,13 +50,14 @@ from ethical_planner.prediction.base import (
     Prediction,
     check_unique_ids,
     empty_prediction,
+    floor_eigenvalues,
     rotated_covariance,
 )
 from ethical_planner.road_users import RoadUser, RoadUserType
 
 #: Identifies a weights file of this model; bump ``FORMAT_VERSION`` when the layout changes.
 FORMAT = "etp-learned-predictor"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 #: The weights shipped with the package (``ethical_planner/data``).
 SHIPPED_WEIGHTS = "learned_predictor.pt"
 
@@ -66,6 +74,15 @@ GROUP_OF_TYPE = {
     RoadUserType.BICYCLE: 3,
     RoadUserType.PEDESTRIAN: 4,
 }
+#: Smallest eigenvalue [m^2] of the network's covariance before the mixture scales it: a
+#: 10 cm standard deviation, the recordings' position accuracy (the planner floors at its
+#: own ``PredictionConfig.covariance_floor`` on top).
+RESOLUTION_FLOOR = 0.01
+#: Road users slower than this [m/s] at prediction time are "standing": their mixture is
+#: fitted apart from that of moving ones (a queue that stays or starts, not a drift).
+MOVING_SPEED = 0.5
+#: Motion states of the calibration: index 0 standing, 1 moving.
+MOTION_STATES = ("standing", "moving")
 _POSITION_SCALE = 10.0  # [m]
 _LOG_2PI = float(np.log(2.0 * np.pi))
 _SPEED_SCALE = 10.0  # [m/s]
@@ -310,10 +327,11 @@ class LearnedModel:
     Args:
         spec: the window and network shape.
         state: the network's parameters (``state_dict``).
-        calibration: recalibration (a, b) per type group and step, shape
-            (len(TYPE_GROUPS), n_future, 2): the covariance becomes
-            a * s^(2 (b - 1)) * Sigma with s^2 = trace(Sigma) / 2 [m^2] (``recalibrate``);
-            a = b = 1 (the default) leaves it unchanged.
+        calibration: the Gaussian scale mixture per type group, motion state
+            (``MOTION_STATES``) and step, shape (len(TYPE_GROUPS), 2, n_future, K, 2):
+            [..., k, 0] the weight w_k (>= 0, summing to 1 over k), [..., k, 1] the
+            variance factor v_k > 0 of component k (covariance v_k Sigma). None: one
+            component with w = v = 1 (the network's own Gaussian).
         meta: provenance (data, split, seed, metrics); plain values.
     """
 
@@ -334,17 +352,19 @@ class LearnedModel:
             except (RuntimeError, KeyError) as error:
                 raise ValueError(f"weights do not fit the model {spec}: {error}") from None
         self.network.eval()
-        shape = (len(TYPE_GROUPS), spec.n_future, 2)
-        calibration = np.ones(shape) if calibration is None else np.asarray(calibration, dtype=float)
-        if (
-            calibration.shape != shape
-            or not np.all(np.isfinite(calibration))
-            or calibration[..., 0].min() <= 0
-        ):
-            raise ValueError(f"calibration must be finite with shape {shape} and factors a > 0")
-        self.calibration = calibration
+        self.calibration = check_calibration(
+            np.ones((len(TYPE_GROUPS), len(MOTION_STATES), spec.n_future, 1, 2))
+            if calibration is None
+            else calibration,
+            spec,
+        )
         self.meta = dict(meta or {})
         self._torch = torch
+
+    @property
+    def n_components(self) -> int:
+        """Components K of the calibrated mixture."""
+        return int(self.calibration.shape[3])
 
     # ------------------------------------------------------------------ files
 
@@ -364,6 +384,9 @@ class LearnedModel:
     @classmethod
     def load(cls, path: str | Path | None = None) -> LearnedModel:
         """Load a weights file (``torch.load(..., weights_only=True)``); None loads the shipped one.
+
+        A version-1 file (one covariance factor per step) gives its network with no
+        calibration (one Gaussian); ``etp predictor calibrate`` refits it as a mixture.
 
         Raises:
             ValueError: the file is missing, corrupted, or not a weights file of this model.
@@ -386,14 +409,17 @@ class LearnedModel:
             ) from None
         if not isinstance(payload, dict) or payload.get("format") != FORMAT:
             raise ValueError(f"learned predictor weights {path}: not a {FORMAT} file")
-        if payload.get("version") != FORMAT_VERSION:
+        version = payload.get("version")
+        if version not in (1, FORMAT_VERSION):
             raise ValueError(
-                f"learned predictor weights {path}: format version {payload.get('version')!r}, "
-                f"this code reads {FORMAT_VERSION}"
+                f"learned predictor weights {path}: format version {version!r}, "
+                f"this code reads 1 and {FORMAT_VERSION}"
             )
         try:
             spec = ModelSpec(**payload["spec"])
-            calibration = payload["calibration"].numpy()
+            # Version 1 held one covariance factor per step (off by default): its network
+            # is read with the network's own Gaussian; `etp predictor calibrate` fits a mixture.
+            calibration = payload["calibration"].numpy() if version == FORMAT_VERSION else None
             return cls(spec, payload["state"], calibration, payload.get("meta", {}))
         except (KeyError, TypeError, AttributeError, ValueError) as error:
             raise ValueError(f"learned predictor weights {path}: {error}") from None
@@ -402,10 +428,18 @@ class LearnedModel:
 
     def predict_local(
         self, features: np.ndarray, groups: np.ndarray, current_speed: np.ndarray, calibrated: bool = True
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Mean [m] (n, n_future, 2) and covariance [m^2] (n, n_future, 2, 2) in each road user's frame.
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The mixture of each road user in its own frame.
 
-        Covariances are recalibrated (if ``calibrated``) and made non-decreasing in size.
+        Args:
+            features: ``encode`` output, shape (n, n_features).
+            groups: type-group index, shape (n,).
+            current_speed: [m/s], shape (n,); selects the motion state.
+            calibrated: False gives the network's own Gaussian (K = 1, v = 1).
+
+        Returns:
+            (mean [m] (n, n_future, 2), weights (n, n_future, K), component covariances
+            [m^2] (n, n_future, K, 2, 2)).
         """
         torch = self._torch
         with torch.inference_mode():
@@ -415,26 +449,51 @@ class LearnedModel:
             )
             cov = chol @ chol.transpose(-1, -2)
         mean = mean.double().numpy()
-        cov = cov.double().numpy()
-        if calibrated:
-            cov = recalibrate(cov, self.calibration[groups])
+        cov = floor_eigenvalues(cov.double().numpy(), RESOLUTION_FLOOR)
         # Uncertainty never shrinks along the horizon: the size s^2 = trace / 2 is raised
-        # to its running maximum (per-step networks and calibration need not be monotone).
-        s2 = np.maximum(0.5 * (cov[..., 0, 0] + cov[..., 1, 1]), 1e-12)
-        cov = cov * (np.maximum.accumulate(s2, axis=1) / s2)[..., None, None]
-        return mean, cov
+        # to its running maximum (the network's steps need not be monotone).
+        s2 = 0.5 * (cov[..., 0, 0] + cov[..., 1, 1])
+        s2_max = np.maximum.accumulate(s2, axis=1)
+        cov = cov * (s2_max / s2)[..., None, None]
+        s2 = s2_max
+        if not calibrated:
+            return mean, np.ones(mean.shape[:2] + (1,)), cov[:, :, None]
+        params = self.calibration[groups, motion_state(current_speed)]  # (n, n_future, K, 2)
+        weight, components = params[..., 0].copy(), params[..., 1, None, None] * cov[:, :, None]
+        # Nor does the mixture's: its size sum_k w_k v_k s^2 is raised to its running maximum
+        # by scaling every component of the step alike (weights per step need not be monotone).
+        total = np.einsum("nfk,nfk->nf", weight, params[..., 1]) * s2
+        components *= (np.maximum.accumulate(total, axis=1) / total)[..., None, None, None]
+        return mean, weight, components
 
 
-def recalibrate(cov: np.ndarray, params: np.ndarray) -> np.ndarray:
-    """Covariances rescaled by a * s^(2 (b - 1)), s^2 = trace / 2 (b > 1 spreads confident and unsure apart).
+def motion_state(speed: np.ndarray) -> np.ndarray:
+    """Index into ``MOTION_STATES`` of each speed [m/s], shape (n,): 1 from ``MOVING_SPEED`` on."""
+    return (np.abs(np.asarray(speed, dtype=float)) >= MOVING_SPEED).astype(np.int64)
 
-    Args:
-        cov: [m^2], shape (..., 2, 2).
-        params: (a, b), shape (..., 2), broadcast against ``cov``'s leading axes.
+
+def check_calibration(calibration: np.ndarray, spec: ModelSpec) -> np.ndarray:
+    """The mixture parameters as float64, checked (see ``LearnedModel``).
+
+    Raises:
+        ValueError: wrong shape, non-finite values, negative weights or weights not
+            summing to 1, or variance factors <= 0.
     """
-    s2 = np.maximum(0.5 * (cov[..., 0, 0] + cov[..., 1, 1]), 1e-12)
-    factor = params[..., 0] * s2 ** (params[..., 1] - 1.0)
-    return cov * factor[..., None, None]
+    calibration = np.asarray(calibration, dtype=float)
+    shape = (len(TYPE_GROUPS), len(MOTION_STATES), spec.n_future)
+    if calibration.ndim != 5 or calibration.shape[:3] != shape or calibration.shape[4] != 2:
+        raise ValueError(
+            f"calibration must have shape {shape + ('K', 2)} (weight, variance factor per component), "
+            f"got {calibration.shape}"
+        )
+    weights, factors = calibration[..., 0], calibration[..., 1]
+    if not np.all(np.isfinite(calibration)):
+        raise ValueError("calibration must be finite")
+    if np.any(weights < 0) or not np.allclose(weights.sum(-1), 1.0, atol=1e-9):
+        raise ValueError("calibration weights must be >= 0 and sum to 1 over the components")
+    if np.any(factors <= 0):
+        raise ValueError("calibration variance factors must be > 0")
+    return calibration
 
 
 def history_windows(
@@ -508,39 +567,51 @@ def _interpolation_matrix(times: np.ndarray, at: np.ndarray) -> np.ndarray:
 def to_world(
     mean_local: np.ndarray, cov_local: np.ndarray, origin: np.ndarray, heading: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Rotate local-frame means (n, k, 2) and covariances (n, k, 2, 2) into the world frame."""
+    """Rotate local-frame means (n, k, 2) and covariances (n, k, ..., 2, 2) into the world frame."""
     c, s = np.cos(heading), np.sin(heading)
     rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)  # (n, 2, 2)
     mean = np.einsum("nij,nkj->nki", rot, mean_local) + origin[:, None, :]
-    cov = np.einsum("nij,nkjl,nml->nkim", rot, cov_local, rot)
+    cov = np.einsum("nij,nk...jl,nml->nk...im", rot, cov_local, rot)
     return mean, cov
 
 
 def _on_times(
     mean: np.ndarray,
+    weight: np.ndarray,
     cov: np.ndarray,
     origin: np.ndarray,
     cov0: np.ndarray,
     spec: ModelSpec,
     times: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Model steps -> the caller's times: linear in between, t=0 observed, t^2 growth beyond."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Model steps -> the caller's times: linear in between, t=0 observed, t^2 growth beyond.
+
+    Args:
+        mean: [m] (n, n_future, 2). weight: (n, n_future, K). cov: [m^2] (n, n_future, K, 2, 2).
+        origin: [m] (n, 2). cov0: observation covariance [m^2] (n, 2, 2) (every component at t = 0).
+
+    Returns:
+        (mean (n, n_t, 2), weights (n, n_t, K), covariances (n, n_t, K, 2, 2)).
+    """
+    k = weight.shape[-1]
     knots = np.concatenate([[0.0], spec.future_times])
-    mean_k = np.concatenate([origin[:, None, :], mean], axis=1)  # (n, K, 2)
-    cov_k = np.concatenate([cov0[:, None], cov], axis=1)
+    mean_k = np.concatenate([origin[:, None, :], mean], axis=1)  # (n, K_t, 2)
+    weight_k = np.concatenate([weight[:, :1], weight], axis=1)
+    cov_k = np.concatenate([np.repeat(cov0[:, None, None], k, axis=2), cov], axis=1)
     last = knots[-1]
     inside = np.minimum(times, last)
-    weights = _interpolation_matrix(knots, inside)  # (n_t, K)
-    out_mean = np.einsum("tk,nkc->ntc", weights, mean_k)
-    out_cov = np.einsum("tk,nkij->ntij", weights, cov_k)
+    matrix = _interpolation_matrix(knots, inside)  # (n_t, K_t)
+    out_mean = np.einsum("tk,nkc->ntc", matrix, mean_k)
+    out_weight = np.einsum("tk,nkc->ntc", matrix, weight_k)
+    out_cov = np.einsum("tk,nkcij->ntcij", matrix, cov_k)
     beyond = times > last
     if beyond.any():
         velocity = (mean_k[:, -1] - mean_k[:, -2]) / (knots[-1] - knots[-2])  # (n, 2)
         extra = times[beyond] - last
         out_mean[:, beyond] = mean_k[:, -1][:, None, :] + velocity[:, None, :] * extra[None, :, None]
         growth = (times[beyond] / last) ** 2
-        out_cov[:, beyond] = cov_k[:, -1][:, None] * growth[None, :, None, None]
-    return out_mean, out_cov
+        out_cov[:, beyond] = cov_k[:, -1][:, None] * growth[None, :, None, None, None]
+    return out_mean, out_weight / out_weight.sum(-1, keepdims=True), out_cov
 
 
 class LearnedPredictor:
@@ -581,13 +652,13 @@ class LearnedPredictor:
         width = np.array([u.shape.width for u in road_users])
         positions, headings, speeds, available = history_windows(road_users, spec)
         features = encode(groups, length, width, positions, headings, speeds, available, spec)
-        mean_l, cov_l = self.model.predict_local(
+        mean_l, weight, cov_l = self.model.predict_local(
             features, groups, speeds[:, -1], config.learned_recalibration
         )
         origin, yaw0 = positions[:, -1], headings[:, -1]
         mean, cov = to_world(mean_l, cov_l, origin, yaw0)
         cov0 = rotated_covariance(np.float64(config.sigma0_long), np.float64(config.sigma0_lat), yaw0)
-        mean_t, cov_t = _on_times(mean, cov, origin, cov0, spec, times)
+        mean_t, weight_t, comp_t = _on_times(mean, weight, cov, origin, cov0, spec, times)
         step = np.diff(mean_t, axis=1, prepend=mean_t[:, :1])
         step[:, 0] = step[:, 1] if n_t > 1 else 0.0
         moving = np.hypot(step[..., 0], step[..., 1]) > 1e-3
@@ -596,17 +667,20 @@ class LearnedPredictor:
         dt[0] = dt[1] if n_t > 1 else 1.0
         speed = np.hypot(step[..., 0], step[..., 1]) / np.maximum(dt, 1e-9)[None, :]
         speed[:, 0] = np.abs(speeds[:, -1])
-        cov_t = 0.5 * (cov_t + np.swapaxes(cov_t, -1, -2))
+        comp_t = 0.5 * (comp_t + np.swapaxes(comp_t, -1, -2))
+        mixture = weight_t.shape[-1] > 1
         prediction = Prediction(
             ids=ids,
             types=tuple(u.type for u in road_users),
             mean=mean_t,
-            cov=cov_t,
+            cov=np.einsum("ntk,ntkij->ntij", weight_t, comp_t),
             heading=heading,
             speed=speed,
             length=length,
             width=width,
             mass=np.array([u.mass for u in road_users]),
+            component_weight=weight_t if mixture else None,
+            component_cov=comp_t if mixture else None,
         )
         return prediction.with_covariance_floor(config.covariance_floor)
 

@@ -1,4 +1,4 @@
-"""``etp predictor train`` and ``etp predictor eval``: the learned predictor's data commands.
+"""``etp predictor train``, ``calibrate`` and ``eval``: the learned predictor's data commands.
 
 Both read recorded CommonRoad traffic (default: ``../shared/commonroad`` beside the
 repository, or ``$ETP_COMMONROAD``) and need the extra ``[learned]`` (torch).
@@ -16,12 +16,12 @@ DEFAULT_CACHE = Path("logs/predictor_cache")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``predictor train`` and ``predictor eval`` to ``etp``."""
+    """Add ``predictor train``, ``predictor calibrate`` and ``predictor eval`` to ``etp``."""
     predictor = subparsers.add_parser(
         "predictor",
         help="train or evaluate the learned predictor on recorded CommonRoad traffic",
         description="Learned probabilistic predictor (torch): train on recorded trajectories split by "
-        "location, recalibrate, evaluate against constant velocity and CTRA.",
+        "location, calibrate a Gaussian scale mixture, evaluate against constant velocity and CTRA.",
     )
     commands = predictor.add_subparsers(dest="predictor_command", required=True, metavar="ACTION")
 
@@ -45,9 +45,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         )
         p.add_argument("--no-cache", action="store_true", help="parse every file, write no cache")
 
+    def components_option(p: argparse.ArgumentParser) -> None:
+        p.add_argument(
+            "--components",
+            type=int,
+            default=2,
+            help="Gaussians of the calibrated scale mixture, 1..4 (default 2; the planner integrates each)",
+        )
+
     train = commands.add_parser(
         "train",
-        help="train, recalibrate on the validation locations, save the weights",
+        help="train, calibrate on the validation locations, save the weights",
         description="Train the learned predictor; writes a weights file loadable with weights_only=True.",
     )
     data_options(train)
@@ -63,8 +71,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument(
         "--report", type=Path, default=None, metavar="DIR", help="also evaluate on the test split"
     )
+    components_option(train)
     add_json(train)
     train.set_defaults(handler=_train)
+
+    calibrate = commands.add_parser(
+        "calibrate",
+        help="refit a weights file's mixture calibration on the validation locations",
+        description="Keep the network, fit the Gaussian scale mixture (weights and variance factors per "
+        "type, motion state and step) by maximum likelihood on the validation split, write a new file.",
+    )
+    data_options(calibrate)
+    calibrate.add_argument(
+        "--weights", type=Path, default=None, metavar="FILE", help="weights (default: shipped)"
+    )
+    calibrate.add_argument("--out", type=Path, required=True, metavar="FILE", help="weights file to write")
+    components_option(calibrate)
+    add_json(calibrate)
+    calibrate.set_defaults(handler=_calibrate)
 
     evaluate = commands.add_parser(
         "eval",
@@ -109,6 +133,11 @@ def _check_counts(args: argparse.Namespace) -> None:
         raise ValueError(f"--max-files must be >= 1, got {args.max_files}")
 
 
+def _check_components(args: argparse.Namespace) -> None:
+    if not 1 <= args.components <= 4:
+        raise ValueError(f"--components must be between 1 and 4, got {args.components}")
+
+
 def _require_torch() -> None:
     try:
         import torch  # noqa: F401
@@ -121,6 +150,7 @@ def _train(args: argparse.Namespace) -> int:
     from harm_calibration.predictor.train import TrainConfig
 
     _check_counts(args)
+    _check_components(args)
     _require_torch()
     if args.max_minutes is not None and args.max_minutes <= 0:
         raise ValueError(f"--max-minutes must be > 0, got {args.max_minutes}")
@@ -140,9 +170,32 @@ def _train(args: argparse.Namespace) -> int:
         max_files=args.max_files,
         report=args.report,
         log=lambda line: say(args, line),
+        n_components=args.components,
     )
     if args.json:
         print_json({"weights": str(args.out), **summary})
+    return 0
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    from harm_calibration.predictor.pipeline import run_calibration
+
+    _check_counts(args)
+    _check_components(args)
+    _require_torch()
+    result = run_calibration(
+        args.weights,
+        _data(args),
+        args.out,
+        args.components,
+        args.stride,
+        args.workers,
+        None if args.no_cache else args.cache,
+        args.max_files,
+        log=lambda line: say(args, line),
+    )
+    if args.json:
+        print_json(result)
     return 0
 
 

@@ -1,7 +1,8 @@
 """Evaluation of predictors on held-out windows (``etp predictor eval``).
 
 Per type group and per category (cars; pedestrians and cyclists), for the learned
-predictor before and after recalibration and for two analytic baselines:
+predictor with its calibrated Gaussian scale mixture (``learned``) and as the
+network's own single Gaussian (``learned, one Gaussian``), and for analytic baselines:
 
 - ``constant_velocity``: the product's analytic predictor (``predict_constant_turn_rate``)
   with the turn rate off and its default covariance growth (``PredictionConfig``);
@@ -11,14 +12,20 @@ predictor before and after recalibration and for two analytic baselines:
   given the acceleration and turn rate of the last 0.2 s.
 
 Metrics over the model's horizon (0.2 .. 4 s): ADE and FDE [m], mean negative
-log-likelihood of the true position [nats, 2-D], and the fractions of true positions
-inside the 1- and 2-sigma ellipses at 1, 2 and 3 s (nominal 39.3 % and 86.5 %). All
-covariances are floored at ``EVAL_FLOOR`` (10 cm standard deviation, the recordings'
-resolution; recalibration uses the same floor) before they are scored: the planner's
+log-likelihood of the true position [nats, 2-D] under the predicted density, and the
+coverage at 1, 2 and 3 s: the fraction of true positions inside the region that holds
+the nominal 39.3 % (1 sigma) and 86.5 % (2 sigma) of the predicted probability. For a
+single Gaussian that region is the 1- or 2-sigma ellipse; for a scale mixture with a
+shared mean (components v_k Sigma) it is the ellipse d^2 <= r^2 of Sigma whose mixture
+mass ``mixture_cdf`` is the level (the smallest region of that mass, since the density
+falls with d^2). A true position is inside iff the mixture mass within its own d^2 is
+at most the level. Baseline covariances are floored at ``EVAL_FLOOR`` (10 cm
+standard deviation, the recordings' accuracy; the learned network's covariance is
+floored at the same ``RESOLUTION_FLOOR`` before its mixture scales it): the planner's
 0.1 m^2 floor would put nearly every true position inside the 1-sigma ellipse at 1 s.
-Cars and pedestrians/cyclists are also scored on moving road users only: road users
-standing still (waiting at the SinD intersection) have almost no error. A reliability
-plot draws, for nominal levels 5 .. 95 %, the observed fraction inside the level's ellipse (steps 0.2 .. 3 s).
+Cars and pedestrians/cyclists are also scored apart as moving (>= 0.5 m/s at
+prediction time) and standing road users. A reliability plot draws, for nominal levels
+5 .. 95 %, the observed fraction inside the level's region (steps 0.2 .. 3 s).
 """
 
 from __future__ import annotations
@@ -33,10 +40,10 @@ import numpy as np
 from ethical_planner.config import PredictionConfig
 from ethical_planner.prediction import make_predictor
 from ethical_planner.prediction.constant_turn_rate import predict_constant_turn_rate
-from ethical_planner.prediction.learned import LearnedModel, to_world
+from ethical_planner.prediction.learned import MOVING_SPEED, RESOLUTION_FLOOR, LearnedModel, to_world
 from ethical_planner.road_users import KinematicState, RoadUser, RoadUserType, Shape
 from harm_calibration.predictor.data import Windows
-from harm_calibration.predictor.train import NOMINAL, mahalanobis_sq
+from harm_calibration.predictor.train import NOMINAL, mahalanobis_sq, mixture_cdf
 
 #: Report categories: name -> type groups.
 CATEGORIES = {
@@ -48,38 +55,42 @@ CATEGORIES = {
     "pedestrians+cyclists": (3, 4),
 }
 COVERAGE_TIMES = (1.0, 2.0, 3.0)
-#: Categories also reported for moving road users only (speed at prediction time >= MOVING_SPEED).
+#: Categories also reported for moving (speed at prediction time >= MOVING_SPEED) and standing road users.
 MOVING_CATEGORIES = ("car", "pedestrians+cyclists")
-MOVING_SPEED = 0.5  # [m/s]
-#: Covariance floor [m^2] of calibration and evaluation: a 10 cm standard deviation, the
-#: recordings' position resolution. The planner's own floor (0.1 m^2) is applied on top in use.
-EVAL_FLOOR = 0.01
+#: Covariance floor [m^2] of the baselines in evaluation: that of the learned network. The
+#: planner's own floor (0.1 m^2) is applied on top in use.
+EVAL_FLOOR = RESOLUTION_FLOOR
 
 
 @dataclass(frozen=True, slots=True, eq=False)
 class Scored:
-    """One predictor's output on a set of windows, world frame.
+    """One predictor's output on a set of windows, world frame: a Gaussian scale mixture.
 
     Attributes:
-        mean: [m] (n, n_future, 2). cov: [m^2] (n, n_future, 2, 2), floored.
+        mean: [m] (n, n_future, 2).
+        weight: component weights (n, n_future, K) (K = 1: one Gaussian).
+        cov: component covariances [m^2] (n, n_future, K, 2, 2), proportional to
+            each other per window and step.
     """
 
     mean: np.ndarray
+    weight: np.ndarray
     cov: np.ndarray
 
+    @classmethod
+    def gaussian(cls, mean: np.ndarray, cov: np.ndarray) -> Scored:
+        """One Gaussian per window and step: cov (n, n_future, 2, 2)."""
+        return cls(mean, np.ones(mean.shape[:2] + (1,)), cov[:, :, None])
 
-def floor_covariance(cov: np.ndarray, floor: float) -> np.ndarray:
-    """Covariances with eigenvalues raised to ``floor`` [m^2] (as the planner does)."""
-    eigval, eigvec = np.linalg.eigh(cov)
-    return np.einsum("...ij,...j,...kj->...ik", eigvec, np.maximum(eigval, floor), eigvec)
 
-
-def learned_outputs(model: LearnedModel, windows: Windows, calibrated: bool, floor: float) -> Scored:
-    """The learned model's prediction of every window."""
+def learned_outputs(model: LearnedModel, windows: Windows, calibrated: bool) -> Scored:
+    """The learned model's prediction of every window (its mixture if ``calibrated``)."""
     spec = model.spec
-    mean, cov = model.predict_local(windows.features(spec), windows.groups, windows.speeds[:, -1], calibrated)
+    mean, weight, cov = model.predict_local(
+        windows.features(spec), windows.groups, windows.speeds[:, -1], calibrated
+    )
     mean, cov = to_world(mean, cov, windows.positions[:, -1], windows.headings[:, -1])
-    return Scored(mean, floor_covariance(cov, floor))
+    return Scored(mean, weight, cov)
 
 
 def _road_users(windows: Windows, yaw_rate: np.ndarray, accel: np.ndarray | None = None) -> list[RoadUser]:
@@ -143,31 +154,54 @@ def baseline_outputs(
     default = make_predictor(replace(PredictionConfig(), covariance_floor=config.covariance_floor))
     analytic = default.predict(_road_users(windows, yaw_rate, accel), np.concatenate([[0.0], times]))
     return {
-        "constant_velocity": Scored(cv.mean[:, 1:], cv.cov[:, 1:]),
-        "ctra": Scored(ctra_mean(windows, times, step), ct.cov[:, 1:]),
-        f"default ({default.name})": Scored(analytic.mean[:, 1:], analytic.cov[:, 1:]),
+        "constant_velocity": Scored.gaussian(cv.mean[:, 1:], cv.cov[:, 1:]),
+        "ctra": Scored.gaussian(ctra_mean(windows, times, step), ct.cov[:, 1:]),
+        f"default ({default.name})": Scored.gaussian(analytic.mean[:, 1:], analytic.cov[:, 1:]),
     }
 
 
-def gaussian_nll_np(mean: np.ndarray, cov: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Negative log-likelihood [nats] of 2-D targets, (...)."""
+def mixture_nll(scored: Scored, target: np.ndarray) -> np.ndarray:
+    """Negative log-likelihood [nats] of 2-D targets (n, n_future, 2) under the mixtures, (n, n_future)."""
+    cov = scored.cov
     det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] ** 2
-    return 0.5 * mahalanobis_sq(mean, cov, target) + 0.5 * np.log(det) + math.log(2 * math.pi)
+    d2 = mahalanobis_sq(scored.mean[:, :, None], cov, target[:, :, None])
+    log_p = np.log(np.maximum(scored.weight, 1e-300)) - 0.5 * d2 - 0.5 * np.log(det) - math.log(2 * math.pi)
+    top = log_p.max(axis=-1)
+    return -(top + np.log(np.exp(log_p - top[..., None]).sum(-1)))
+
+
+def probability_inside(scored: Scored, target: np.ndarray) -> np.ndarray:
+    """Predicted probability of the smallest region that reaches each target, (n, n_future).
+
+    A target is inside the region of nominal level p iff this is <= p. Components are
+    proportional (v_k Sigma), so the region is an ellipse of the first component's shape.
+    """
+    cov0 = scored.cov[:, :, 0]
+    d2 = mahalanobis_sq(scored.mean, cov0, target)
+    factor = scored.cov[..., 0, 0] / cov0[..., None, 0, 0]  # v_k / v_0, (n, n_future, K)
+    return mixture_cdf(d2, scored.weight, factor)
+
+
+def _selections(windows: Windows) -> list[tuple[str, np.ndarray]]:
+    """Report rows: each category, then moving and standing road users of MOVING_CATEGORIES."""
+    moving = np.abs(windows.speeds[:, -1]) >= MOVING_SPEED
+    out = [(name, np.isin(windows.groups, groups)) for name, groups in CATEGORIES.items()]
+    for state, mask in (("moving", moving), ("standing", ~moving)):
+        out += [
+            (f"{name} ({state})", np.isin(windows.groups, CATEGORIES[name]) & mask)
+            for name in MOVING_CATEGORIES
+        ]
+    return out
 
 
 def metrics(scored: Scored, windows: Windows, times: np.ndarray) -> dict[str, dict]:
     """Per category: n, ADE, FDE [m], NLL [nats], coverage at ``COVERAGE_TIMES`` (fractions)."""
     err = np.linalg.norm(scored.mean - windows.future, axis=-1)
-    nll = gaussian_nll_np(scored.mean, scored.cov, windows.future)
-    d2 = mahalanobis_sq(scored.mean, scored.cov, windows.future)
+    nll = mixture_nll(scored, windows.future)
+    inside = probability_inside(scored, windows.future)
     cols = [int(np.argmin(np.abs(times - t))) for t in COVERAGE_TIMES]
     out = {}
-    moving = np.abs(windows.speeds[:, -1]) >= MOVING_SPEED
-    selections = [(name, np.isin(windows.groups, groups)) for name, groups in CATEGORIES.items()]
-    selections += [
-        (f"{name} (moving)", np.isin(windows.groups, CATEGORIES[name]) & moving) for name in MOVING_CATEGORIES
-    ]
-    for name, rows in selections:
+    for name, rows in _selections(windows):
         if not rows.any():
             continue
         out[name] = {
@@ -175,22 +209,21 @@ def metrics(scored: Scored, windows: Windows, times: np.ndarray) -> dict[str, di
             "ade": float(err[rows].mean()),
             "fde": float(err[rows, -1].mean()),
             "nll": float(nll[rows].mean()),
-            "coverage_1sigma": {f"{times[c]:g}": float((d2[rows, c] <= 1.0).mean()) for c in cols},
-            "coverage_2sigma": {f"{times[c]:g}": float((d2[rows, c] <= 4.0).mean()) for c in cols},
+            "coverage_1sigma": {f"{times[c]:g}": float((inside[rows, c] <= NOMINAL[1]).mean()) for c in cols},
+            "coverage_2sigma": {f"{times[c]:g}": float((inside[rows, c] <= NOMINAL[2]).mean()) for c in cols},
         }
     return out
 
 
 def reliability(scored: Scored, windows: Windows, times: np.ndarray, levels: np.ndarray) -> dict[str, list]:
-    """Observed fraction inside the ellipse of each nominal level, per category (steps <= 3 s)."""
-    d2 = mahalanobis_sq(scored.mean, scored.cov, windows.future)[:, times <= 3.0 + 1e-9]
-    radius_sq = -2.0 * np.log(1.0 - levels)
+    """Observed fraction inside the region of each nominal level, per category (steps <= 3 s)."""
+    inside = probability_inside(scored, windows.future)[:, times <= 3.0 + 1e-9]
     out = {}
     for name in ("car", "pedestrians+cyclists"):
         rows = np.isin(windows.groups, CATEGORIES[name])
         if rows.any():
-            values = d2[rows].ravel()
-            out[name] = [float((values <= r).mean()) for r in radius_sq]
+            values = inside[rows].ravel()
+            out[name] = [float((values <= level).mean()) for level in levels]
     return out
 
 
@@ -210,7 +243,7 @@ def plot_reliability(curves: dict[str, dict[str, list]], levels: np.ndarray, pat
                 ax.plot(levels, per[category], marker="o", markersize=3, label=name)
         ax.set_title(f"{category}: steps 0.2-3 s, held-out locations")
         ax.set_xlabel("nominal probability inside the ellipse")
-        ax.set_ylabel("observed fraction inside")
+        ax.set_ylabel("observed fraction inside the region of that probability")
         ax.set_xlim(0, 1)
         ax.set_ylim(0, 1)
         ax.grid(alpha=0.3)
@@ -226,8 +259,8 @@ def evaluate(model: LearnedModel, windows: Windows, config: PredictionConfig | N
     spec = model.spec
     times = spec.future_times
     outputs = {
-        "learned": learned_outputs(model, windows, False, config.covariance_floor),
-        "learned_recalibrated": learned_outputs(model, windows, True, config.covariance_floor),
+        f"learned ({model.n_components}-Gaussian mixture)": learned_outputs(model, windows, True),
+        "learned, one Gaussian": learned_outputs(model, windows, False),
         **baseline_outputs(windows, times, spec.history_step, config),
     }
     levels = np.linspace(0.05, 0.95, 19)

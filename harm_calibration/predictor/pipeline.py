@@ -1,4 +1,4 @@
-"""Train -> recalibrate -> save, and evaluate a weights file: what the commands run."""
+"""Train -> calibrate -> save, recalibrate a weights file, evaluate one: what the commands run."""
 
 from __future__ import annotations
 
@@ -9,21 +9,48 @@ from pathlib import Path
 
 import numpy as np
 
-from ethical_planner.prediction.learned import TYPE_GROUPS, LearnedModel, ModelSpec, to_world
-from harm_calibration.predictor.data import SPLIT, build_windows, split_windows
-from harm_calibration.predictor.evaluate import EVAL_FLOOR, evaluate, write_report
-from harm_calibration.predictor.train import TrainConfig, TrainLog, fit_calibration, train
+from ethical_planner.prediction.learned import (
+    MOTION_STATES,
+    TYPE_GROUPS,
+    LearnedModel,
+    ModelSpec,
+    motion_state,
+    to_world,
+)
+from harm_calibration.predictor.data import SPLIT, Windows, build_windows, split_windows
+from harm_calibration.predictor.evaluate import evaluate, write_report
+from harm_calibration.predictor.train import TrainConfig, TrainLog, fit_mixture, mahalanobis_sq, train
 
 
-def calibrate(model: LearnedModel, val_windows, floor: float) -> np.ndarray:  # noqa: ANN001 - Windows
-    """Fit and set the model's recalibration on validation windows; returns it (see ``fit_calibration``)."""
+def calibrate(model: LearnedModel, val_windows: Windows, n_components: int = 2) -> np.ndarray:
+    """Fit and set the model's Gaussian scale mixture on validation windows; returns it (``fit_mixture``)."""
     spec = model.spec
     w = val_windows
-    mean, cov = model.predict_local(w.features(spec), w.groups, w.speeds[:, -1], False)
-    mean, cov = to_world(mean, cov, w.positions[:, -1], w.headings[:, -1])
-    params = fit_calibration(cov, w.future - mean, w.groups, floor)
+    if len(w) == 0:
+        raise ValueError("calibration needs windows of the validation split")
+    mean, _, cov = model.predict_local(w.features(spec), w.groups, w.speeds[:, -1], False)
+    mean, cov = to_world(mean, cov[:, :, 0], w.positions[:, -1], w.headings[:, -1])
+    d2 = mahalanobis_sq(mean, cov, w.future)
+    sizes = 0.5 * (cov[..., 0, 0] + cov[..., 1, 1])
+    params = fit_mixture(d2, sizes, w.groups, motion_state(w.speeds[:, -1]), n_components)
     model.calibration = params
     return params
+
+
+def calibration_summary(params: np.ndarray, times: np.ndarray) -> dict[str, dict]:
+    """Weights and standard-deviation factors sqrt(v) per group and motion state at 1, 2, 3 s."""
+    cols = {f"{t:g}": int(np.argmin(np.abs(times - t))) for t in (1.0, 2.0, 3.0)}
+    return {
+        f"{TYPE_GROUPS[g]} {MOTION_STATES[m]}": {
+            t: {
+                "weight": np.round(params[g, m, c, :, 0], 3).tolist(),
+                "sigma_factor": np.round(np.sqrt(params[g, m, c, :, 1]), 3).tolist(),
+            }
+            for t, c in cols.items()
+        }
+        for g in range(len(TYPE_GROUPS))
+        for m in range(len(MOTION_STATES))
+    }
 
 
 def run_training(
@@ -37,8 +64,9 @@ def run_training(
     max_files: int | None = None,
     report: Path | None = None,
     log: Callable[[str], None] = print,
+    n_components: int = 2,
 ) -> tuple[LearnedModel, TrainLog, dict]:
-    """Read data, train, recalibrate on the validation split, save to ``out``.
+    """Read data, train, fit the mixture calibration on the validation split, save to ``out``.
 
     Returns:
         (model, training log, a summary: window counts, step checks, timings).
@@ -73,7 +101,7 @@ def run_training(
         config,
         progress=lambda e, a, b: log(f"  epoch {e + 1}: train NLL {a:.3f}, validation NLL {b:.3f}"),
     )
-    factors = calibrate(model, splits["val"], EVAL_FLOOR)
+    params = calibrate(model, splits["val"], n_components)
     total = time.perf_counter() - start
     summary = {
         "seed": config.seed,
@@ -87,9 +115,7 @@ def run_training(
         "step_checks": [list(c) for c in corrected],
         "files_read": len(reports),
         "files_refused": len(refused),
-        "calibration_mean_factor": {
-            TYPE_GROUPS[g]: float(factors[g].mean()) for g in range(len(TYPE_GROUPS))
-        },
+        "calibration": calibration_summary(params, spec.future_times),
     }
     model.meta = {k: json.dumps(v) if isinstance(v, dict | list) else v for k, v in summary.items()}
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -102,6 +128,40 @@ def run_training(
         write_report(evaluate(model, splits["test"]), report)
         log(f"held-out evaluation: {report / 'report.md'}")
     return model, train_log, summary
+
+
+def run_calibration(
+    weights: Path | None,
+    data: Sequence[Path],
+    out: Path,
+    n_components: int = 2,
+    stride: int = 2,
+    workers: int = 2,
+    cache: Path | None = None,
+    max_files: int | None = None,
+    log: Callable[[str], None] = print,
+) -> dict:
+    """Refit the mixture calibration of a weights file (None: the shipped one) on the validation split.
+
+    The network is unchanged; the file written to ``out`` has the new calibration and
+    the old provenance plus the calibration's summary.
+    """
+    model = LearnedModel.load(weights)
+    windows, _ = build_windows(data, model.spec, stride, workers, cache, max_files)
+    val = split_windows(windows)["val"]
+    log(f"calibrating on {len(val)} validation windows from {', '.join(SPLIT['val'])}")
+    params = calibrate(model, val, n_components)
+    summary = calibration_summary(params, model.spec.future_times)
+    model.meta = {**model.meta, "calibration": json.dumps(summary), "calibration_windows": len(val)}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    model.save(out)
+    log(f"saved {out} ({n_components}-component mixture)")
+    return {
+        "weights": str(out),
+        "components": n_components,
+        "validation_windows": len(val),
+        "calibration": summary,
+    }
 
 
 def run_evaluation(

@@ -7,10 +7,12 @@ epochs, the epoch with the best validation NLL kept. Reproducible: one seed driv
 torch's initialisation and the numpy generator that shuffles, and torch runs on a
 fixed number of threads.
 
-Recalibration fits one covariance factor per type group and future step on the
-validation split: the factor c that brings the fractions of true positions inside
-the 1-sigma and 2-sigma ellipses of c * Sigma closest to their nominal values
-(sum of absolute errors, searched on a log grid).
+Calibration fits, on the validation split, a Gaussian scale mixture per type group,
+motion state and future step: with d^2 the squared Mahalanobis distance of the true
+position under the network's (floored) covariance Sigma, the mixture
+sum_k w_k N(mu, v_k Sigma) has the density sum_k w_k exp(-d^2 / (2 v_k)) / (2 pi v_k
+sqrt|Sigma|), so maximising its likelihood is fitting a mixture of exponentials to
+d^2 / 2, done by expectation-maximisation (``fit_mixture``).
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ethical_planner.prediction.learned import (
+    MOTION_STATES,
+    RESOLUTION_FLOOR,
     TYPE_GROUPS,
     LearnedModel,
     ModelSpec,
@@ -188,64 +192,119 @@ def mahalanobis_sq(mean: np.ndarray, cov: np.ndarray, target: np.ndarray) -> np.
     return (c * d[..., 0] ** 2 - 2 * b * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / det
 
 
-def _eigen_parts(cov: np.ndarray, error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eigenvalues (..., 2) of ``cov`` and squared projections (..., 2) of ``error`` on its eigenvectors."""
-    eigval, eigvec = np.linalg.eigh(cov)
-    proj = np.einsum("...ji,...j->...i", eigvec, error)
-    return np.maximum(eigval, 0.0), proj**2
+#: A calibration cell (type group, motion state, step) with fewer validation windows than
+#: this takes the fit of its type group's windows of both motion states.
+MIN_CELL_WINDOWS = 50
+#: Quantile of the covariance sizes in a calibration cell that sets its narrowest component
+#: (``fit_mixture``): 5 %, the cell's most confident windows.
+BOUND_QUANTILE = 0.05
+#: Smallest variance factor a component may take (a component of exactly zero size
+#: would be a point mass).
+MIN_VARIANCE_FACTOR = 1e-6
 
 
-def coverage_d2(eigval: np.ndarray, proj2: np.ndarray, factor: np.ndarray, floor: float) -> np.ndarray:
-    """Squared Mahalanobis distances under factor * Sigma with eigenvalues floored at ``floor`` [m^2]."""
-    return (proj2 / np.maximum(factor[..., None] * eigval, floor)).sum(-1)
-
-
-def fit_calibration(
-    cov: np.ndarray,
-    error: np.ndarray,
-    groups: np.ndarray,
-    floor: float,
-    a_grid: np.ndarray | None = None,
-    b_grid: np.ndarray | None = None,
+def fit_scale_mixture(
+    d2: np.ndarray, n_components: int, min_factor: float = MIN_VARIANCE_FACTOR, iterations: int = 500
 ) -> np.ndarray:
-    """Recalibration (a, b) per type group and step from validation errors.
-
-    The covariance becomes a * s^(2 (b - 1)) * Sigma (s^2 = trace / 2,
-    ``ethical_planner.prediction.learned.recalibrate``), then floored like the
-    planner's; (a, b) minimise the sum of absolute differences between the observed
-    and nominal fractions inside the 1- and 2-sigma ellipses. b = 1 is a plain scale;
-    b > 1 widens the unsure predictions more than the confident ones (errors with
-    heavier tails than one Gaussian).
+    """Maximum-likelihood weights and variance factors of a 2-D Gaussian scale mixture.
 
     Args:
-        cov: uncalibrated covariances [m^2], (n, n_steps, 2, 2).
-        error: true minus predicted position [m], (n, n_steps, 2).
-        groups: type group per row, (n,).
-        floor: covariance floor [m^2] applied after recalibration.
-        a_grid, b_grid: candidates (default: a 0.1 .. 10 log spaced x 60, b 0.75 .. 1.5 x 16).
+        d2: squared Mahalanobis distances of the true positions under Sigma, shape (n,).
+        n_components: K.
+        min_factor: smallest variance factor of a component. The M-step clips each
+            v_k to it, which is the constrained maximum (the likelihood is unimodal in
+            each v_k given the responsibilities).
+        iterations: expectation-maximisation steps (stops earlier once the
+            log-likelihood changes by less than 1e-10 nats per window).
 
     Returns:
-        (n_groups, n_steps, 2); (1, 1) for a group without rows.
+        (K, 2): weight and variance factor v of each component, narrowest first. Under
+        the fit, component k is N(mu, v_k Sigma), so d^2 / (2 v_k) is exponential.
     """
-    a_grid = np.geomspace(0.1, 10.0, 60) if a_grid is None else a_grid
-    b_grid = np.linspace(0.75, 1.5, 16) if b_grid is None else b_grid
-    out = np.ones((len(TYPE_GROUPS), cov.shape[1], 2))
-    eigval, proj2 = _eigen_parts(cov, error)
-    s2 = np.maximum(eigval.mean(-1), 1e-12)
+    d2 = np.asarray(d2, dtype=float)
+    if d2.ndim != 1 or len(d2) == 0 or not np.all(np.isfinite(d2)) or d2.min() < 0:
+        raise ValueError("d2 must be a non-empty 1-D array of finite values >= 0")
+    if n_components < 1:
+        raise ValueError(f"n_components must be >= 1, got {n_components}")
+    # Start from spread quantiles: each component covers a band of the distances.
+    quantiles = np.linspace(0.25, 0.9, n_components) if n_components > 1 else np.array([0.5])
+    min_factor = max(float(min_factor), MIN_VARIANCE_FACTOR)
+    v = np.maximum(np.quantile(d2, quantiles) / 2.0, min_factor)
+    if n_components == 1:
+        v = np.array([max(d2.mean() / 2.0, min_factor)])
+    w = np.full(n_components, 1.0 / n_components)
+    previous = -np.inf
+    for _ in range(iterations):
+        log_p = np.log(np.maximum(w, 1e-300)) - d2[:, None] / (2.0 * v) - np.log(v)  # (n, K)
+        top = log_p.max(axis=1, keepdims=True)
+        resp = np.exp(log_p - top)
+        total = resp.sum(axis=1, keepdims=True)
+        loglik = float(np.mean(np.log(total[:, 0]) + top[:, 0]))
+        resp /= total
+        mass = resp.sum(axis=0)
+        w = mass / len(d2)
+        v = np.maximum((resp * d2[:, None]).sum(axis=0) / (2.0 * np.maximum(mass, 1e-300)), min_factor)
+        if loglik - previous < 1e-10:
+            break
+        previous = loglik
+    order = np.argsort(v)
+    return np.stack([w[order], v[order]], axis=-1)
+
+
+def fit_mixture(
+    d2: np.ndarray,
+    sizes: np.ndarray,
+    groups: np.ndarray,
+    states: np.ndarray,
+    n_components: int = 2,
+    resolution: float = RESOLUTION_FLOOR,
+) -> np.ndarray:
+    """The calibration of a ``LearnedModel``: a scale mixture per type group, motion state and step.
+
+    No component may be narrower than the recordings' accuracy for the most confident
+    windows of its cell: v_k >= resolution / q(size), with size = trace(Sigma) / 2 and
+    q its ``BOUND_QUANTILE`` quantile in the cell. Without this bound, standing road
+    users (whose recorded positions are frozen to the millimetre) get components of
+    millimetres, claiming a precision the recordings cannot confirm; for moving road
+    users (size >> resolution from about 0.5 s on) it is inactive.
+
+    Args:
+        d2: squared Mahalanobis distances of validation positions under the network's
+            floored covariance Sigma, shape (n, n_steps).
+        sizes: trace(Sigma) / 2 [m^2], shape (n, n_steps).
+        groups: type group per window, shape (n,).
+        states: motion state per window (``motion_state``), shape (n,).
+        n_components: K.
+        resolution: [m^2] the bound's variance (``RESOLUTION_FLOOR``).
+
+    Returns:
+        (len(TYPE_GROUPS), len(MOTION_STATES), n_steps, K, 2). A cell with fewer than
+        ``MIN_CELL_WINDOWS`` windows takes its group's fit over both states; a group
+        without windows keeps the network's Gaussian (w = (1, 0, ..), v = 1).
+    """
+    n_steps = d2.shape[1]
+    out = np.zeros((len(TYPE_GROUPS), len(MOTION_STATES), n_steps, n_components, 2))
+    out[..., 1] = 1.0
+    out[..., 0, 0] = 1.0
     for g in range(len(TYPE_GROUPS)):
-        rows = groups == g
-        if not rows.any():
+        in_group = groups == g
+        if not in_group.any():
             continue
-        for step in range(cov.shape[1]):
-            lam, p2, size = eigval[rows, step], proj2[rows, step], s2[rows, step]
-            best, best_err = (1.0, 1.0), np.inf
-            for b in b_grid:
-                shape = size ** (b - 1.0)  # (n,)
-                factor = a_grid[:, None] * shape[None, :]  # (n_a, n)
-                d2 = coverage_d2(lam[None], p2[None], factor, floor)
-                err = np.abs((d2 <= 1.0).mean(1) - NOMINAL[1]) + np.abs((d2 <= 4.0).mean(1) - NOMINAL[2])
-                k = int(np.argmin(err))
-                if err[k] < best_err - 1e-12:
-                    best, best_err = (float(a_grid[k]), float(b)), float(err[k])
-            out[g, step] = best
+        for state in range(len(MOTION_STATES)):
+            rows = in_group & (states == state)
+            if rows.sum() < MIN_CELL_WINDOWS:
+                rows = in_group
+            for step in range(n_steps):
+                bound = resolution / float(np.quantile(sizes[rows, step], BOUND_QUANTILE))
+                out[g, state, step] = fit_scale_mixture(d2[rows, step], n_components, bound)
     return out
+
+
+def mixture_cdf(d2: np.ndarray, weight: np.ndarray, factor: np.ndarray) -> np.ndarray:
+    """Mass of sum_k w_k N(mu, v_k Sigma) inside the ellipse d^2(x) <= d2 of Sigma, shape (...).
+
+    Args:
+        d2: squared Mahalanobis radii under Sigma, shape (...).
+        weight, factor: w_k and v_k, shape (..., K).
+    """
+    return (weight * -np.expm1(-np.asarray(d2)[..., None] / (2.0 * factor))).sum(-1)

@@ -125,12 +125,16 @@ def test_to_world_rotates_means_and_covariances():
 
 def test_weights_files_round_trip_and_bad_files_give_clear_errors(tmp_path):
     torch.manual_seed(0)
-    model = LearnedModel(ModelSpec(hidden=(8,)), calibration=np.full((5, 20, 2), 2.0), meta={"seed": 0})
+    calibration = np.zeros((5, 2, 20, 2, 2))
+    calibration[..., 0] = [0.7, 0.3]
+    calibration[..., 1] = [0.5, 4.0]
+    model = LearnedModel(ModelSpec(hidden=(8,)), calibration=calibration, meta={"seed": 0})
     path = tmp_path / "model.pt"
     model.save(path)
     loaded = LearnedModel.load(path)
     assert loaded.spec == model.spec and loaded.meta == {"seed": 0}
-    assert np.all(loaded.calibration == 2.0)
+    np.testing.assert_array_equal(loaded.calibration, calibration)
+    assert loaded.n_components == 2
     for a, b in zip(model.network.parameters(), loaded.network.parameters(), strict=True):
         assert torch.equal(a, b)
     corrupted = tmp_path / "corrupted.pt"
@@ -153,6 +157,61 @@ def test_weights_files_round_trip_and_bad_files_give_clear_errors(tmp_path):
     config = PredictionConfig(model="learned", learned_weights=str(corrupted))
     with pytest.raises(ValueError, match="not a readable weights file"):
         make_predictor(config)
+    # A version-1 file (one covariance factor per step) gives its network, uncalibrated.
+    old = tmp_path / "v1.pt"
+    payload = torch.load(path, weights_only=True)
+    payload["version"], payload["calibration"] = 1, torch.full((5, 20, 2), 2.0, dtype=torch.float64)
+    torch.save(payload, old)
+    assert LearnedModel.load(old).n_components == 1
+    payload["version"] = 7
+    torch.save(payload, old)
+    with pytest.raises(ValueError, match="format version 7"):
+        LearnedModel.load(old)
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda c: c[:, :1], "must have shape"),
+        (lambda c: c * np.array([1.2, 1.0]), "sum to 1"),
+        (lambda c: c * np.array([1.0, 0.0]), "variance factors must be > 0"),
+        (lambda c: np.where(c > 3, np.inf, c), "finite"),
+    ],
+)
+def test_bad_calibration_is_refused(change, message):
+    calibration = np.zeros((5, 2, 20, 2, 2))
+    calibration[..., 0] = [0.7, 0.3]
+    calibration[..., 1] = [0.5, 4.0]
+    with pytest.raises(ValueError, match=message):
+        LearnedModel(ModelSpec(hidden=(4,)), calibration=change(calibration))
+
+
+def test_mixture_prediction_scales_the_network_gaussian_per_motion_state():
+    """Calibrated components are v_k times the uncalibrated covariance; cov is their weighted sum."""
+    calibration = np.zeros((5, 2, 20, 2, 2))
+    calibration[:, 0, :, :, 0] = [0.9, 0.1]  # standing
+    calibration[:, 1, :, :, 0] = [0.6, 0.4]  # moving
+    calibration[..., 1] = [0.5, 4.0]
+    torch.manual_seed(1)
+    model = LearnedModel(ModelSpec(hidden=(8,)), calibration=calibration)
+    users = [moving_user(v=8.0), moving_user(uid=2, kind="pedestrian", v=0.2, x0=5.0)]
+    times = np.array([0.0, 0.5, 1.0, 2.0])
+    plain = LearnedPredictor(PredictionConfig(model="learned", learned_recalibration=False), model)
+    mixed = LearnedPredictor(PredictionConfig(model="learned", covariance_floor=1e-9), model)
+    a = plain.predict(users, times)
+    b = LearnedPredictor(
+        PredictionConfig(model="learned", learned_recalibration=False, covariance_floor=1e-9), model
+    )
+    base = b.predict(users, times)
+    m = mixed.predict(users, times)
+    assert a.n_components == 1 and m.n_components == 2
+    np.testing.assert_allclose(m.mean, base.mean)
+    # Steps after t = 0 (t = 0 is the observation, the same for every component).
+    np.testing.assert_allclose(m.component_weight[0, 1:], np.broadcast_to([0.6, 0.4], (3, 2)))
+    np.testing.assert_allclose(m.component_weight[1, 1:], np.broadcast_to([0.9, 0.1], (3, 2)))
+    for k, v in enumerate([0.5, 4.0]):
+        np.testing.assert_allclose(m.component_cov[:, 2:, k], v * base.cov[:, 2:], rtol=1e-9)
+    np.testing.assert_allclose(m.cov, np.einsum("ntk,ntkij->ntij", m.component_weight, m.component_cov))
 
 
 def test_prediction_is_equivariant_under_rotation_and_translation():
@@ -175,6 +234,7 @@ def test_prediction_is_equivariant_under_rotation_and_translation():
     b = predictor.predict([moved(u) for u in users], times)
     assert b.mean == pytest.approx(a.mean @ rot.T + shift, abs=1e-4)
     assert b.cov == pytest.approx(rot @ a.cov @ rot.T, abs=1e-4)
+    assert b.component_cov == pytest.approx(rot @ a.component_cov @ rot.T, abs=1e-4)
     assert a.mean[:, 0] == pytest.approx(np.array([[0.0, 0.0], [3.0, -2.0]]))
 
 
@@ -183,26 +243,40 @@ def test_shipped_model_predicts_a_known_input_to_stored_values():
     predictor = make_predictor(PredictionConfig(model="learned"))
     assert predictor.name == "learned"
     user = moving_user(yaw=0.0, v=10.0)
-    prediction = predictor.predict([user], np.array([0.0, 1.0, 2.0, 3.0]))
+    times = np.array([0.0, 1.0, 2.0, 3.0])
+    prediction = predictor.predict([user], times)
     assert prediction.mean[0, :, 0] == pytest.approx(SHIPPED_MEAN_X, abs=1e-3)
-    assert np.sqrt(prediction.cov[0, :, 0, 0]) == pytest.approx(SHIPPED_SIGMA_X, abs=1e-3)
     # A car keeps roughly its speed for 3 s (a plausibility band, not the stored value).
     assert 25.0 < prediction.mean[0, 3, 0] < 35.0
-    recalibrated = make_predictor(PredictionConfig(model="learned", learned_recalibration=True))
-    prediction = recalibrated.predict([user], np.array([0.0, 1.0, 2.0, 3.0]))
-    assert np.sqrt(prediction.cov[0, :, 0, 0]) == pytest.approx(SHIPPED_SIGMA_X_RECALIBRATED, abs=1e-3)
+    # The calibrated mixture (default): a confident core and a wide tail per step.
+    assert prediction.component_weight[0] == pytest.approx(np.array(SHIPPED_WEIGHTS), abs=1e-3)
+    assert np.sqrt(prediction.component_cov[0, :, :, 0, 0]) == pytest.approx(
+        np.array(SHIPPED_SIGMA_X), abs=1e-3
+    )
+    # The network's own Gaussian (calibration off): unchanged since the network was trained.
+    single = make_predictor(PredictionConfig(model="learned", learned_recalibration=False))
+    prediction = single.predict([user], times)
+    assert prediction.n_components == 1
+    assert np.sqrt(prediction.cov[0, :, 0, 0]) == pytest.approx(SHIPPED_SIGMA_X_NETWORK, abs=1e-3)
 
 
 def test_prediction_times_beyond_the_model_horizon_continue_smoothly():
-    predictor = LearnedPredictor(PredictionConfig(model="learned"), LearnedModel.load())
+    # Without the planner's floor, which raises each mixture component on its own.
+    config = PredictionConfig(model="learned", covariance_floor=1e-9)
+    predictor = LearnedPredictor(config, LearnedModel.load())
     times = np.arange(0.0, 6.01, 0.1)
     prediction = predictor.predict([moving_user(yaw=0.0, v=10.0)], times)
     step = np.diff(prediction.mean[0, :, 0])
     assert np.all(step > 0.5) and np.all(step < 1.5)
-    # The size of the uncertainty (trace) never shrinks, inside the model's 4 s or beyond.
-    assert np.all(np.diff(np.trace(prediction.cov[0], axis1=-2, axis2=-1)) >= -1e-9)
+    # The size of the mixture (trace of its covariance) never shrinks from one model step
+    # (every 0.2 s) to the next, inside the model's 4 s or beyond; t = 0 is the observation.
+    # (Between steps, weights and components are interpolated apart, so their product may dip.)
+    steps = slice(2, None, 2)
+    assert np.all(np.diff(np.trace(prediction.cov[0, steps], axis1=-2, axis2=-1)) >= -1e-9)
+    assert np.all(np.diff(np.trace(prediction.cov[0, 41:], axis1=-2, axis2=-1)) >= -1e-9)
 
 
 SHIPPED_MEAN_X = [0.0, 10.0543, 20.082, 30.2114]
-SHIPPED_SIGMA_X = [0.3162, 0.3162, 1.2236, 2.6275]
-SHIPPED_SIGMA_X_RECALIBRATED = [0.3162, 0.3162, 0.8342, 1.6662]
+SHIPPED_SIGMA_X_NETWORK = [0.3162, 0.3162, 1.2236, 2.6275]
+SHIPPED_WEIGHTS = [[0.5, 0.5], [0.9183, 0.0817], [0.7927, 0.2073], [0.7852, 0.2148]]
+SHIPPED_SIGMA_X = [[0.3162, 0.3162], [0.3162, 0.595], [0.8144, 2.1762], [1.6865, 4.8888]]

@@ -1,4 +1,4 @@
-"""Training windows, a tiny training run, recalibration and the evaluation metrics."""
+"""Training windows, a tiny training run, the mixture calibration and the evaluation metrics."""
 
 import math
 
@@ -7,23 +7,25 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from ethical_planner.prediction.learned import TYPE_GROUPS, LearnedModel, ModelSpec, recalibrate  # noqa: E402
+from ethical_planner.prediction.learned import MOTION_STATES, TYPE_GROUPS, LearnedModel, ModelSpec  # noqa: E402
 from ethical_planner.road_users import RoadUserType  # noqa: E402
 from harm_calibration.predictor.data import Windows, split_of, track_windows  # noqa: E402
 from harm_calibration.predictor.evaluate import (  # noqa: E402
     Scored,
     ctra_mean,
     evaluate,
-    gaussian_nll_np,
     metrics,
+    mixture_nll,
     report_markdown,
 )
 from harm_calibration.predictor.train import (  # noqa: E402
     NOMINAL,
     TrainConfig,
-    fit_calibration,
+    fit_mixture,
+    fit_scale_mixture,
     group_weights,
     mahalanobis_sq,
+    mixture_cdf,
     train,
 )
 from mujoco_world.scenario.commonroad_tracks import Track  # noqa: E402
@@ -114,35 +116,66 @@ def test_tiny_training_lowers_the_loss_and_is_reproducible():
         assert torch.equal(a, b)
 
 
-def test_calibration_recovers_a_known_variance_factor():
+def _mixture_samples(rng, n, weights, factors, cov):
+    """n draws from sum_k w_k N(0, v_k cov): the component by its weight, then the Gaussian."""
+    component = rng.choice(len(weights), size=n, p=weights)
+    unit = rng.multivariate_normal(np.zeros(2), cov, size=n)
+    return unit * np.sqrt(np.asarray(factors))[component][:, None]
+
+
+def test_scale_mixture_fit_recovers_known_weights_and_factors():
     rng = np.random.default_rng(0)
-    n, steps = 20000, 3
-    # Claimed variances vary over rows; true errors have twice the claimed variance.
-    var = rng.uniform(0.5, 4.0, size=(n, steps))
-    cov = np.zeros((n, steps, 2, 2))
-    cov[..., 0, 0] = cov[..., 1, 1] = var
-    error = rng.normal(size=(n, steps, 2)) * np.sqrt(2.0 * var)[..., None]
-    groups = np.zeros(n, dtype=int)
-    # A plain scale (b fixed at 1) recovers the factor 2.
-    scale = fit_calibration(cov, error, groups, floor=1e-6, b_grid=np.array([1.0]))
-    assert scale[0, :, 0] == pytest.approx(2.0, rel=0.05) and np.all(scale[0, :, 1] == 1.0)
-    assert np.all(scale[1:] == 1.0)  # groups without rows keep (1, 1)
-    # With the power free, the coverage objective has a ridge of (a, b); coverage is what it fits.
-    params = fit_calibration(cov, error, groups, floor=1e-6)
-    for step in range(steps):
-        d2 = mahalanobis_sq(np.zeros(2), recalibrate(cov[:, step], params[0, step][None]), error[:, step])
-        assert (d2 <= 1).mean() == pytest.approx(NOMINAL[1], abs=0.02)
-        assert (d2 <= 4).mean() == pytest.approx(NOMINAL[2], abs=0.02)
-    assert NOMINAL[1] == pytest.approx(0.3935, abs=1e-4) and NOMINAL[2] == pytest.approx(0.8647, abs=1e-4)
+    cov = np.array([[2.0, 0.6], [0.6, 1.0]])
+    error = _mixture_samples(rng, 40000, [0.7, 0.3], [0.25, 6.0], cov)
+    d2 = mahalanobis_sq(np.zeros(2), cov, error)
+    fit = fit_scale_mixture(d2, 2)
+    assert fit[:, 0] == pytest.approx([0.7, 0.3], abs=0.02)
+    assert fit[:, 1] == pytest.approx([0.25, 6.0], rel=0.06)
+    # One component: the maximum-likelihood factor of a 2-D Gaussian is mean(d2) / 2.
+    assert fit_scale_mixture(d2, 1)[0] == pytest.approx([1.0, d2.mean() / 2])
+    with pytest.raises(ValueError, match="d2 must be"):
+        fit_scale_mixture(np.array([1.0, np.nan]), 2)
 
 
-def test_recalibration_power_spreads_sizes():
-    cov = np.zeros((2, 2, 2))
-    cov[0] = np.eye(2) * 0.25
-    cov[1] = np.eye(2) * 4.0
-    out = recalibrate(cov, np.array([2.0, 1.5]))
-    # a * s2^(b - 1) with s2 = 0.25 and 4: factors 2 * 0.5 = 1 and 2 * 2 = 4.
-    assert out[0, 0, 0] == pytest.approx(0.25) and out[1, 0, 0] == pytest.approx(16.0)
+def test_mixture_cdf_matches_monte_carlo():
+    rng = np.random.default_rng(1)
+    cov = np.array([[1.0, -0.3], [-0.3, 0.5]])
+    weights, factors = np.array([0.6, 0.4]), np.array([0.5, 4.0])
+    d2 = mahalanobis_sq(np.zeros(2), cov, _mixture_samples(rng, 200000, weights, factors, cov))
+    for radius_sq in (0.3, 1.0, 4.0, 9.0):
+        assert mixture_cdf(np.array(radius_sq), weights, factors) == pytest.approx(
+            (d2 <= radius_sq).mean(), abs=0.004
+        )
+
+
+def test_mixture_calibration_cells_and_fallbacks():
+    rng = np.random.default_rng(2)
+    n, steps = 3000, 2
+    groups = np.where(np.arange(n) < 2960, 0, 4)  # 40 pedestrians: too few for a cell of their own
+    states = np.where(np.arange(n) % 2 == 0, 0, 1)
+    factors = np.where(states == 0, 0.2, 3.0)[:, None] * np.ones((1, steps))
+    error = rng.normal(size=(n, steps, 2)) * np.sqrt(factors)[..., None]
+    d2 = (error**2).sum(-1)
+    params = fit_mixture(d2, np.ones((n, steps)), groups, states, n_components=2)
+    assert params.shape == (len(TYPE_GROUPS), len(MOTION_STATES), steps, 2, 2)
+    # Each car cell is one Gaussian of its own size: the mixture's moment is its factor.
+    for state, factor in ((0, 0.2), (1, 3.0)):
+        moment = (params[0, state, :, :, 0] * params[0, state, :, :, 1]).sum(-1)
+        assert moment == pytest.approx(factor, rel=0.1)
+    # Pedestrians pool both states; absent groups keep the network's Gaussian.
+    np.testing.assert_array_equal(params[4, 0], params[4, 1])
+    assert np.all(params[1, :, :, 0] == [1.0, 1.0]) and np.all(params[1, :, :, 1, 0] == 0.0)
+    assert np.allclose(params[..., 0].sum(-1), 1.0)
+    # Windows whose covariance is at the resolution floor get no component narrower than it.
+    bounded = fit_mixture(d2, np.full((n, steps), 0.5), groups, states, n_components=2, resolution=0.5)
+    assert bounded[0, 0, :, :, 1].min() == pytest.approx(1.0) and params[0, 0, :, :, 1].min() < 0.5
+
+
+def _windows_with_future(rng, future):
+    """Synthetic windows (cars and pedestrians) with ``future`` as their true positions."""
+    windows = synthetic_windows(2, rng)
+    w = windows.subset(np.arange(len(future)) % len(windows))
+    return Windows(*(getattr(w, f) for f in Windows.__slots__[:-2]), future, w.recording)
 
 
 def test_metrics_on_exact_gaussian_samples():
@@ -152,12 +185,7 @@ def test_metrics_on_exact_gaussian_samples():
     cov = np.broadcast_to(np.array([[2.0, 0.6], [0.6, 1.0]]), (n, k, 2, 2)).copy()
     mean = np.zeros((n, k, 2))
     future = rng.multivariate_normal(np.zeros(2), cov[0, 0], size=(n, k))
-    windows = synthetic_windows(2, rng)
-    windows = windows.subset(np.arange(len(windows)) % len(windows) < len(windows))
-    idx = np.arange(n) % len(windows)
-    w = windows.subset(idx)
-    w = Windows(*(getattr(w, f) for f in Windows.__slots__[:-2]), future, w.recording)
-    m = metrics(Scored(mean, cov), w, SPEC.future_times)
+    m = metrics(Scored.gaussian(mean, cov), _windows_with_future(rng, future), SPEC.future_times)
     for category in m.values():
         for value in category["coverage_1sigma"].values():
             assert value == pytest.approx(NOMINAL[1], abs=0.04)
@@ -167,7 +195,35 @@ def test_metrics_on_exact_gaussian_samples():
     expected = 1.0 + math.log(2 * math.pi) + 0.5 * math.log(np.linalg.det(cov[0, 0]))
     assert m["car"]["nll"] == pytest.approx(expected, abs=0.05)
     assert mahalanobis_sq(np.zeros(2), np.eye(2) * 4.0, np.array([2.0, 0.0])) == pytest.approx(1.0)
-    assert gaussian_nll_np(np.zeros(2), np.eye(2), np.zeros(2)) == pytest.approx(math.log(2 * math.pi))
+    assert NOMINAL[1] == pytest.approx(0.3935, abs=1e-4) and NOMINAL[2] == pytest.approx(0.8647, abs=1e-4)
+
+
+def test_metrics_on_exact_mixture_samples_and_a_single_gaussian_fails_them():
+    """Targets from a scale mixture: it covers at nominal, its moment-matched Gaussian does not."""
+    rng = np.random.default_rng(4)
+    n, k = 6000, SPEC.n_future
+    base = np.array([[1.5, 0.4], [0.4, 0.8]])
+    weights, factors = np.array([0.75, 0.25]), np.array([0.3, 5.0])
+    future = _mixture_samples(rng, n * k, weights, factors, base).reshape(n, k, 2)
+    mean = np.zeros((n, k, 2))
+    comp = np.broadcast_to(factors[:, None, None] * base, (n, k, 2, 2, 2)).copy()
+    mixture = Scored(mean, np.broadcast_to(weights, (n, k, 2)).copy(), comp)
+    windows = _windows_with_future(rng, future)
+    m = metrics(mixture, windows, SPEC.future_times)["car"]
+    assert list(m["coverage_1sigma"].values()) == pytest.approx([NOMINAL[1]] * 3, abs=0.04)
+    assert list(m["coverage_2sigma"].values()) == pytest.approx([NOMINAL[2]] * 3, abs=0.03)
+    single = Scored.gaussian(mean, np.broadcast_to((weights * factors).sum() * base, (n, k, 2, 2)).copy())
+    s = metrics(single, windows, SPEC.future_times)["car"]
+    assert min(s["coverage_1sigma"].values()) > NOMINAL[1] + 0.1
+    assert s["nll"] > m["nll"] + 0.1
+    # The mixture NLL is that of its density (independent: a sum of scipy densities).
+    from scipy.stats import multivariate_normal
+
+    x = future[7, 3]
+    density = sum(
+        w * multivariate_normal(np.zeros(2), v * base).pdf(x) for w, v in zip(weights, factors, strict=True)
+    )
+    assert mixture_nll(mixture, future)[7, 3] == pytest.approx(-math.log(density), rel=1e-9)
 
 
 def test_ctra_follows_a_circle_without_acceleration():
@@ -187,8 +243,8 @@ def test_evaluate_reports_every_predictor_and_category():
     torch.manual_seed(0)
     result = evaluate(LearnedModel(SPEC), synthetic_windows(4, rng))
     assert set(result["metrics"]) == {
-        "learned",
-        "learned_recalibrated",
+        "learned (1-Gaussian mixture)",
+        "learned, one Gaussian",
         "constant_velocity",
         "ctra",
         "default (constant_acceleration)",
@@ -199,7 +255,7 @@ def test_evaluate_reports_every_predictor_and_category():
         "pedestrians+cyclists",
         "car (moving)",
         "pedestrians+cyclists (moving)",
-    }
+    }  # the synthetic road users all move: no "(standing)" rows
     text = report_markdown(result)
     assert "| car | constant_velocity |" in text and "Nominal coverage" in text
     assert len(TYPE_GROUPS) == 5
