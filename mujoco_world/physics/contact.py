@@ -276,6 +276,7 @@ class _Pair:
 
     __slots__ = (
         "e", "damping", "stiffness", "yield_force", "d_max", "f_max", "energy", "unload", "normal", "static",
+        "depth", "last_dt",
     )  # fmt: skip
 
     def __init__(self, e: float, damping: float, stiffness: float, yield_force: float) -> None:
@@ -286,6 +287,8 @@ class _Pair:
         self.f_max = 0.0
         self.energy = 0.0
         self.unload = 0.0
+        self.depth: float | None = None  # crush: deflection, integrated from the closing rate [m]
+        self.last_dt = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -551,7 +554,15 @@ class ContactDynamics:
         return self.scene.static_boxes[index] if index >= 0 else None
 
     def _crush_pair(self, a: int, b: int, state: _Pair, dt: float, rows: list) -> None:
-        """Crush force of a pair along its first-touch normal, at the footprints' overlap centroid."""
+        """Crush force of a pair along its first-touch normal, at the footprints' overlap centroid.
+
+        The deflection is the geometric depth at the first touch and from then on the
+        integral of the closing speed of the material points at the overlap centroid along
+        the normal, so the force does work exactly as its force-deflection curve says. The
+        geometric depth along the normal alone grows when a struck body spins (its
+        diagonal turns into the normal) and then pushes the bodies apart with energy that
+        no crush stored (a T-bone at the rear axle came out with e = 1.85).
+        """
         scene = self.scene
         qa = scene.qpos[a]
         c, s = math.cos(qa[2]), math.sin(qa[2])
@@ -561,19 +572,24 @@ class ContactDynamics:
         shape_b = self._footprint(b, state.static)
         if shape_b is None:
             return
-        depth = (
-            shape_a.support(nx, ny)
-            + shape_b.support(-nx, -ny)
-            - ((shape_b.x - shape_a.x) * nx + (shape_b.y - shape_a.y) * ny)
-        )
-        force = self._crush_force(state, depth) if depth > 0 else 0.0
-        if force <= 0.0:
-            return
         overlap = shape_a.polygon().intersection(shape_b.polygon())
         if overlap.is_empty:
             return
         centre = overlap.centroid
         px, py = float(centre.x), float(centre.y)
+        if state.depth is None:
+            depth = (
+                shape_a.support(nx, ny)
+                + shape_b.support(-nx, -ny)
+                - ((shape_b.x - shape_a.x) * nx + (shape_b.y - shape_a.y) * ny)
+            )
+        else:
+            (vbx, vby), (vax, vay) = _velocity_at(scene, b, px, py), _velocity_at(scene, a, px, py)
+            depth = state.depth - ((vbx - vax) * nx + (vby - vay) * ny) * state.last_dt
+        state.depth, state.last_dt = depth, dt
+        force = self._crush_force(state, depth) if depth > 0 else 0.0
+        if force <= 0.0:
+            return
         rows.append((a, b, force * nx, force * ny, px, py, nx, ny, depth))
         if self.friction > 0.0:
             self._friction(a, b, force, px, py, nx, ny, dt, rows)
