@@ -27,10 +27,11 @@ reflection T(h, a) -> T(ah, 1/a) that keeps a <= 1 (each term within 3e-8,
 than the gate radius from the mean are dropped (each below 7.6e-9, ``_FAR_MIN``).
 With 16 terms per octagon, p is within 1e-6 of the closed form; measured against
 the exact evaluation over 2.5 million triples, the largest difference was 5e-8.
-The work runs in chunks on reused scratch buffers (no allocation in the loop) and,
-for large inputs, on the threads of the caller's ``ethical_planner.workers.Workers``
-(``ETHICAL_PLANNER_THREADS``, default min(2, CPU count), 1 inside a worker process);
-results do not depend on the number of threads.
+It is a compiled kernel (``ethical_planner.jit``) that visits every triple once, with
+no temporaries; for large inputs blocks of trajectories run on the threads of the
+caller's ``ethical_planner.workers.Workers`` (``ETHICAL_PLANNER_THREADS``, default
+min(2, CPU count), 1 inside a worker process); results do not depend on the number of
+threads.
 
 Everything is a pure function over struct-of-arrays inputs; nothing is mutated.
 """
@@ -44,14 +45,23 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import ndtr, owens_t
 
+from ethical_planner.jit import kernel
 from ethical_planner.validation import check_shape, shaped_array
-from ethical_planner.workers import Scratch, Workers
+from ethical_planner.workers import Workers
 
 __all__ = ["CollisionProbability", "collision_probability", "polygon_gaussian_mass"]
 
 #: An origin closer than this (whitened units) to an edge's line is "on" that line:
 #: the edge's triangle (origin, a, b) then has mass below 0.4 * 1e-12 and counts 0.
 _H_TOL = 1e-12
+#: Fast path: h and t of an edge are sums of products of whitened quantities of order 10,
+#: with absolute rounding errors near 1e-14; with the origin near a vertex (h and t both
+#: tiny) their ratio, the wedge angle, is then ill-conditioned (an origin 1e-11 from a
+#: vertex gave p 1e-6 off). An origin closer than this to an edge's line counts as on
+#: that line: the edge's triangle (mass below h |ab| / (4 pi) < 1e-7 for |ab| < 40)
+#: counts 0 and the winding number is the sum of the other edges' wedge angles, each
+#: accurate to 1e-14 / _ON_LINE.
+_ON_LINE = 3e-8
 #: Exact path: edges farther than this (whitened units) from the origin contribute
 #: |T(h, a)| <= Phi(-8.5) / 2 < 1e-17 and are skipped.
 _H_SKIP = 8.5
@@ -84,20 +94,10 @@ _Q_STEP = 1.0 / 4096.0
 _Q_TABLE = ndtr(-np.arange(int(_FAR_MAX / _Q_STEP) + 2) * _Q_STEP)
 _Q_SLOPE = np.append(np.diff(_Q_TABLE), 0.0)
 
-#: Owen's T on the hot path is evaluated in float32 (twice the SIMD width): rounding adds
-#: at most 2.6e-8 to the Gauss-Legendre error (measured against SciPy on a 1601 x 801 grid).
-_OWENS_DTYPE = np.float32
-
-#: Survivor triples per kernel call on one thread: large enough to amortise numpy's
-#: per-call cost, small enough that the scratch buffers stay in cache.
-_CHUNK = 4096
-#: Triples gated per block (a block of trajectories against all road users and steps).
-_GATE_BLOCK = 32768
-#: With two threads numpy must run long loops between Python statements: each thread
-#: switch hands the GIL over (a wake-up of the other core, tens of us on a VM), so the
-#: threaded path uses 4x larger chunks and blocks, and only from this many triples on.
-_CHUNK_THREADED = 16384
-_GATE_BLOCK_THREADED = 131072
+#: Owen's T on the hot path is evaluated in float32: rounding adds at most 2.6e-8 to the
+#: Gauss-Legendre error (measured against SciPy on a 1601 x 801 grid).
+#: From this many triples, ``collision_probability`` splits its work over the threads of
+#: its ``Workers``.
 _PARALLEL_MIN = 200_000
 
 
@@ -151,7 +151,7 @@ def collision_probability(
             deviations (along the covariance's major axis) apart get p = 0 without an
             integral; the mass cut off is below Phi(-gate_sigmas) (1e-9 at 6).
             ``math.inf`` disables the gate.
-        workers: helper threads and scratch buffers; large inputs (from
+        workers: helper threads; large inputs (from
             ``_PARALLEL_MIN`` triples) use its threads. None makes a fresh one for this
             call (threads from ``ETHICAL_PLANNER_THREADS``); pass one to reuse buffers.
 
@@ -246,28 +246,20 @@ def collision_probability(
 
     # Edges dropped beyond gate_sigmas whitened units, the gate's own scale (_FAR_MIN).
     far = min(max(gate_sigmas, _FAR_MIN), _FAR_MAX)
-    problem = _Problem(n_traj, n_obs, n_t, obs_rows, ego_rows, degenerate, far)
-    # Blocks of trajectories: small enough for the cache, at least two per thread so that
-    # the threads finish together.
+    # Blocks of trajectories, at least two per thread so that the threads finish together;
+    # each block writes its own rows of the outputs, so the result does not depend on
+    # which thread runs which block.
     workers = Workers() if workers is None else workers
     threads = workers.threads if probability.size >= _PARALLEL_MIN else 1
-    chunk, gate_block = (_CHUNK, _GATE_BLOCK) if threads == 1 else (_CHUNK_THREADED, _GATE_BLOCK_THREADED)
-    block = max(1, min(gate_block // (n_obs * n_t), -(-n_traj // (2 * threads))))
+    block = -(-n_traj // (2 * threads)) if threads > 1 else n_traj
     jobs = [(start, min(start + block, n_traj)) for start in range(0, n_traj, block)]
 
     def run(job: tuple[int, int]) -> None:
-        start, stop = job
         _gate_and_integrate(
-            problem, start, stop, chunk, probability[start:stop], mean_overlap[start:stop], workers.scratch
+            obs_rows, ego_rows, n_obs, n_t, job[0], job[1], degenerate, far, probability, mean_overlap
         )
 
-    # Each block writes its own rows of the outputs, so the result does not depend on
-    # which thread runs which block.
-    if threads > 1:
-        workers.parallel_for(jobs, run)
-    else:
-        for job in jobs:
-            run(job)
+    workers.parallel_for(jobs, run)
     return CollisionProbability(probability, mean_overlap)
 
 
@@ -411,178 +403,71 @@ def _winding(h: np.ndarray, t1: np.ndarray, t2: np.ndarray, on_line: np.ndarray)
     return winding
 
 
-# --- fast path: gate, octagon edges, Owen's T ---------------------------------------------
+# --- fast path: compiled kernels (gate, octagon edges, Owen's T) ----------------------------
 
-# Rows of the per-(obs, t) table built in collision_probability.
-_O_MX, _O_MY, _O_W, _O_SX, _O_SY, _O_LEN, _O_C, _O_D, _O_CEGO, _O_REACH2 = (
-    0,
-    1,
-    slice(2, 5),
-    slice(5, 7),
-    slice(7, 9),
-    slice(9, 11),
-    11,
-    12,
-    13,
-    14,
-)
+# Rows of the per-(obs, t) table built in collision_probability: mean x, y; whitening
+# w11, w21, w22; the whitened road-user segments (x of both, y of both, lengths of both);
+# det W * length * width of the road user; the dot product of its two segments;
+# det W * length * width of the ego; the squared gate radius.
+_O_MX, _O_MY, _O_W11, _O_W21, _O_W22 = 0, 1, 2, 3, 4
+_O_SX, _O_SY, _O_LEN = 5, 7, 9
+_O_C, _O_D, _O_CEGO, _O_REACH2 = 11, 12, 13, 14
 _O_ROWS = 15
+# Rows of the per-(traj, t) table: centre x, y and the raw ego segments
+# (L cos, -W sin) as x and (L sin, W cos) as y.
 _E_ROWS = 6
 
+#: The Gauss-Legendre rule and the tail table as the kernels read them.
+_GL_S2_32 = np.array(_GL_S2, dtype=np.float32)
+_GL_W_32 = np.array(_GL_W, dtype=np.float32)
+_Q_INV_STEP = 1.0 / _Q_STEP
+_TWO_PI = 2.0 * math.pi
 
-@dataclass(frozen=True, slots=True, eq=False)
-class _Problem:
-    """Inputs of one ``collision_probability`` call, flattened for gathers.
 
-    Attributes:
-        n_traj: number of candidates.
-        n_obs: number of road users.
-        n_t: number of steps.
-        obs_rows: per-(obs, t) rows (see collision_probability), shape (15, n_obs * n_t).
-        ego_rows: per-(traj, t) rows x, y, L cos, -W sin, L sin, W cos, shape (6, n_traj * n_t).
-        degenerate: a footprint has a zero length or width (zero-length edges).
-        far: edges farther than this from the mean are dropped [whitened units] (_FAR_MIN).
+@kernel
+def _upper_tail(x: float) -> float:
+    """Q(x) = P(Z > x) for 0 <= x <= _FAR_MAX by linear interpolation (see _Q_STEP)."""
+    node = x * _Q_INV_STEP
+    index = int(node)  # truncation = floor for x >= 0
+    return _Q_TABLE[index] + (node - index) * _Q_SLOPE[index]
+
+
+@kernel
+def _owens_t_unit(h: np.float32, a: np.float32) -> np.float32:
+    """Owen's T(h, a) for h >= 0 and 0 <= a <= 1 (see _GL_S2), in float32.
+
+    exp(-h^2 (1 + a^2 s^2) / 2) / (1 + a^2 s^2), weighted and summed over the nodes.
     """
+    a2 = a * a
+    half_h2 = (h * h) * np.float32(-0.5)
+    total = np.float32(0.0)
+    for node in range(_GL_S2_32.size):
+        y = a2 * _GL_S2_32[node] + np.float32(1.0)
+        total += math.exp(half_h2 * y) / y * _GL_W_32[node]
+    return total * a
 
-    n_traj: int
-    n_obs: int
-    n_t: int
-    obs_rows: np.ndarray
-    ego_rows: np.ndarray
-    degenerate: bool
-    far: float
 
+@kernel
+def _edge_endpoint(abs_h: float, tail_h: float, t: float, far: float) -> float:
+    """E(|h|, t) = T(|h|, t / |h|) of one edge end, |t| clamped to ``far`` (see _FAR_MIN).
 
-def _gate_and_integrate(
-    problem: _Problem,
-    start: int,
-    stop: int,
-    chunk: int,
-    probability: np.ndarray,
-    mean_overlap: np.ndarray,
-    scratch: Scratch,
-) -> None:
-    """Gate trajectories ``start:stop`` against every (obs, t) and integrate the survivors.
-
-    Args:
-        problem: the flattened inputs.
-        start: first trajectory of the block.
-        stop: one past its last trajectory.
-        chunk: survivors per kernel call.
-        probability: output rows ``start:stop``, shape (stop - start, n_obs, n_t), written.
-        mean_overlap: output rows, same shape, written.
-        scratch: the calling thread's scratch buffers.
-
+    For |t| <= |h|, T(|h|, |t| / |h|) has a <= 1; otherwise Owen's reflection
+    T(h, a) = Q(h) / 2 + Q(ah) / 2 - Q(h) Q(ah) - T(ah, 1 / a) (a > 1) does, with ah = |t|.
     """
-    n_obs, n_t = problem.n_obs, problem.n_t
-    b = stop - start
-    obs, ego = problem.obs_rows, problem.ego_rows
-    # Squared centre distance of every triple of the block, compared with reach^2.
-    ex = ego[0, start * n_t : stop * n_t].reshape(b, 1, n_t)
-    ey = ego[1, start * n_t : stop * n_t].reshape(b, 1, n_t)
-    dx = scratch.get("gate_dx", (b, n_obs, n_t))
-    dy = scratch.get("gate_dy", (b, n_obs, n_t))
-    np.subtract(ex, obs[_O_MX].reshape(n_obs, n_t), out=dx)
-    np.subtract(ey, obs[_O_MY].reshape(n_obs, n_t), out=dy)
-    dx *= dx
-    dy *= dy
-    dx += dy
-    keep = scratch.get("gate_keep", (b, n_obs, n_t), np.bool_)
-    # reach^2 is inf without a gate, which keeps every triple.
-    np.less_equal(dx, obs[_O_REACH2].reshape(n_obs, n_t), out=keep)
-    survivors = np.flatnonzero(keep)
-    if survivors.size == 0:
-        return
-    p_flat = probability.reshape(-1)
-    overlap_flat = mean_overlap.reshape(-1)
-    per_traj = n_obs * n_t
-    for first in range(0, survivors.size, chunk):
-        flat = survivors[first : first + chunk]
-        m = flat.size
-        # Flat triple index (traj, obs, t) -> (obs, t) and (traj, t) row indices.
-        o = scratch.get("idx_o", (m,), np.intp)
-        e = scratch.get("idx_e", (m,), np.intp)
-        step = scratch.get("idx_t", (m,), np.intp)
-        np.remainder(flat, n_t, out=step)
-        np.remainder(flat, per_traj, out=o)
-        np.floor_divide(flat, per_traj, out=e)
-        e *= n_t
-        e += step
-        e += start * n_t
-        mass, inside = _octagon_mass(problem, o, e, scratch)
-        p_flat[flat] = mass
-        overlap_flat[flat] = inside
+    abs_t = min(abs(t), far)
+    big = np.float32(max(abs_t, abs_h))
+    small = np.float32(min(abs_t, abs_h)) / big
+    owens = float(_owens_t_unit(big, small))
+    if abs_t > abs_h:
+        owens = _upper_tail(abs_t) * (0.5 - tail_h) + tail_h * 0.5 - owens
+    return math.copysign(owens, t)
 
 
-def _octagon_mass(
-    problem: _Problem, o: np.ndarray, e: np.ndarray, scratch: Scratch
-) -> tuple[np.ndarray, np.ndarray]:
-    """Gaussian mass of the Minkowski octagons of ``m`` surviving triples.
-
-    Args:
-        problem: the flattened inputs.
-        o: (obs, t) row of each triple, shape (m,).
-        e: (traj, t) row of each triple, shape (m,).
-
-    Returns:
-        Mass in [0, 1] and whether the mean lies in the closed octagon, shape (m,) each;
-        views into scratch buffers, valid until the next call on this thread.
-
-    """
-    h, t1, t2 = _octagon_edges(problem, o, e, scratch)
-    m = o.size
-    get = scratch.get
-    # The mean lies in the closed octagon (touching counts) when it is on the inner side
-    # of every edge line, and strictly inside (winding number 1) when strictly so.
-    lowest = get("lowest_h", (m,))
-    np.minimum.reduce(h, axis=0, out=lowest)
-    inside = get("inside", (m,), np.bool_)
-    np.greater(lowest, -_H_TOL, out=inside)
-    winding = get("winding", (m,))
-    np.greater(lowest, 0.0, out=winding, casting="unsafe")
-    # An edge's term is the mass of the part of its wedge beyond the edge, all at least
-    # r_min (the edge's distance from the origin) away: below exp(-r_min^2 / 2) / 2.
-    # Keep edges with r_min < far and off the origin's line (|h| >= _H_TOL, see
-    # _winding); typically about half of them. Compress those, integrate, add back.
-    h2 = get("h2", (8, m))
-    np.multiply(h, h, out=h2)
-    np.minimum.reduce(h2, axis=0, out=lowest)
-    on_line = np.flatnonzero(lowest < _H_TOL * _H_TOL)
-    if on_line.size:
-        rows = (slice(None), on_line)
-        winding[on_line] = _winding(h[rows], t1[rows], t2[rows], h2[rows] < _H_TOL * _H_TOL)
-    r2 = get("r2", (8, m))
-    np.minimum(t2, 0.0, out=r2)
-    np.maximum(r2, t1, out=r2)  # the edge point nearest to the foot of h, along u
-    r2 *= r2
-    r2 += h2
-    active = get("active", (8, m), np.bool_)
-    test = get("active_test", (8, m), np.bool_)
-    np.less(r2, problem.far * problem.far, out=active)
-    np.greater_equal(h2, _H_TOL * _H_TOL, out=test)
-    active &= test
-    where = np.flatnonzero(active)
-    n = where.size
-    mass = get("mass", (m,))
-    if n:
-        hs = get("h_active", (n,))
-        ts = get("t_active", (2, n))
-        h.take(where, out=hs)
-        t1.take(where, out=ts[0])
-        t2.take(where, out=ts[1])
-        terms = _edge_terms(hs, ts, problem.far, scratch)
-        np.remainder(where, m, out=where)  # flat (edge, triple) -> triple
-        np.subtract(winding, np.bincount(where, weights=terms, minlength=m), out=mass)
-    else:
-        mass[...] = winding
-    np.clip(mass, 0.0, 1.0, out=mass)
-    return mass, inside
-
-
+@kernel
 def _octagon_edges(
-    problem: _Problem, o: np.ndarray, e: np.ndarray, scratch: Scratch
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Whitened edges of the Minkowski octagons, as distances and spans from the origin.
+    obs_rows: np.ndarray, o: int, ego_rows: np.ndarray, e: int, degenerate: bool, edges: np.ndarray
+) -> None:
+    """Whitened edges of one Minkowski octagon, as distances and spans from the origin.
 
     The octagon is the sum of four centred segments g_k (the road user's and the ego's
     whitened edge vectors, k = 0, 1 road user, 2, 3 ego), a zonotope. With
@@ -597,221 +482,171 @@ def _octagon_edges(
     t1 = tau_k - z . u_k, both t2 = t1 + |g_k| (the conventions of polygon_gaussian_mass).
 
     Args:
-        problem: the flattened inputs.
-        o: (obs, t) row of each triple, shape (m,).
-        e: (traj, t) row of each triple, shape (m,).
-
-    Returns:
-        h, t1, t2 of the eight edges, shape (8, m) each (whitened units; degenerate
-        edges have h = t1 = t2 = 0). Views into scratch buffers.
-
+        obs_rows: the per-(obs, t) table, shape (_O_ROWS, n_obs * n_t).
+        o: column of the (obs, t) pair.
+        ego_rows: the per-(traj, t) table, shape (_E_ROWS, n_traj * n_t).
+        e: column of the (traj, t) pair.
+        degenerate: a footprint has a zero length or width (zero-length edges).
+        edges: shape (4, 8), written: h, t1, t2 and |g| of the eight edges (whitened
+            units; degenerate edges have h = t1 = t2 = 0).
     """
-    m = o.size
-    get = scratch.get
-    obs, ego = problem.obs_rows, problem.ego_rows
-    p = get("obs_mean_w", (5, m))  # mean x, y and w11, w21, w22
-    np.take(obs[:5], o, axis=1, out=p)
-    seg_x = get("seg_x", (4, m))
-    seg_y = get("seg_y", (4, m))
-    seg_len = get("seg_len", (4, m))
-    np.take(obs[_O_SX], o, axis=1, out=seg_x[:2])
-    np.take(obs[_O_SY], o, axis=1, out=seg_y[:2])
-    np.take(obs[_O_LEN], o, axis=1, out=seg_len[:2])
-    k = get("obs_cross", (3, m))  # obs cross, obs dot, det W * ego length * width
-    np.take(obs[_O_C : _O_CEGO + 1], o, axis=1, out=k)
-    q = get("ego", (_E_ROWS, m))
-    np.take(ego, e, axis=1, out=q)
-    w11, w21, w22 = p[2], p[3], p[4]
-
-    # Whitened ego centre relative to the mean: z = W (ego - mean).
-    z = get("z", (2, m))
-    np.subtract(q[:2], p[:2], out=z)
-    tmp = get("tmp", (4, m))
-    np.multiply(w21, z[0], out=tmp[0])
-    z[1] *= w22
-    z[1] += tmp[0]
-    z[0] *= w11
+    w11 = obs_rows[_O_W11, o]
+    w21 = obs_rows[_O_W21, o]
+    w22 = obs_rows[_O_W22, o]
+    # Whitened ego centre relative to the mean, z = W (ego - mean), doubled below.
+    z0 = ego_rows[0, e] - obs_rows[_O_MX, o]
+    z1 = ego_rows[1, e] - obs_rows[_O_MY, o]
+    z1 = z1 * w22 + w21 * z0
+    z0 = z0 * w11
+    sx0, sx1 = obs_rows[_O_SX, o], obs_rows[_O_SX + 1, o]
+    sy0, sy1 = obs_rows[_O_SY, o], obs_rows[_O_SY + 1, o]
     # Whitened ego segments: W (L cos, L sin) and W (-Wd sin, Wd cos).
-    np.multiply(w11, q[2:4], out=seg_x[2:])
-    np.multiply(w21, q[2:4], out=seg_y[2:])
-    np.multiply(w22, q[4:6], out=tmp[:2])
-    seg_y[2:] += tmp[:2]
-    np.multiply(seg_x[2:], seg_x[2:], out=seg_len[2:])
-    np.multiply(seg_y[2:], seg_y[2:], out=tmp[:2])
-    seg_len[2:] += tmp[:2]
-    np.sqrt(seg_len[2:], out=seg_len[2:])
-    half_inv = get("half_inv", (4, m))
-    if problem.degenerate:
-        half_inv.fill(0.0)
-        np.divide(0.5, seg_len, out=half_inv, where=seg_len > _MIN_EDGE)
-    else:
-        np.divide(0.5, seg_len, out=half_inv)
-
-    # Road-user x ego cross and dot products, (2, 2, m): [obs segment, ego segment].
-    cross = get("cross", (2, 2, m))
-    dot = get("dot", (2, 2, m))
-    tmp22 = get("tmp22", (2, 2, m))
-    np.multiply(seg_x[:2, None], seg_y[None, 2:], out=cross)
-    np.multiply(seg_y[:2, None], seg_x[None, 2:], out=tmp22)
-    cross -= tmp22
-    np.multiply(seg_x[:2, None], seg_x[None, 2:], out=dot)
-    np.multiply(seg_y[:2, None], seg_y[None, 2:], out=tmp22)
-    dot += tmp22
-    ego_dot = get("ego_dot", (m,))
-    np.multiply(seg_x[2], seg_x[3], out=ego_dot)
-    np.multiply(seg_y[2], seg_y[3], out=tmp[0])
-    ego_dot += tmp[0]
-
+    sx2 = w11 * ego_rows[2, e]
+    sx3 = w11 * ego_rows[3, e]
+    sy2 = w21 * ego_rows[2, e] + w22 * ego_rows[4, e]
+    sy3 = w21 * ego_rows[3, e] + w22 * ego_rows[5, e]
+    length = edges[3]
+    length[0] = obs_rows[_O_LEN, o]
+    length[1] = obs_rows[_O_LEN + 1, o]
+    length[2] = math.sqrt(sx2 * sx2 + sy2 * sy2)
+    length[3] = math.sqrt(sx3 * sx3 + sy3 * sy3)
+    # Road-user x ego cross and dot products [road-user segment][ego segment].
+    c02 = sx0 * sy2 - sy0 * sx2
+    c03 = sx0 * sy3 - sy0 * sx3
+    c12 = sx1 * sy2 - sy1 * sx2
+    c13 = sx1 * sy3 - sy1 * sx3
+    d02 = sx0 * sx2 + sy0 * sy2
+    d03 = sx0 * sx3 + sy0 * sy3
+    d12 = sx1 * sx2 + sy1 * sy2
+    d13 = sx1 * sx3 + sy1 * sy3
+    ego_dot = sx2 * sx3 + sy2 * sy3
+    obs_cross, obs_dot, ego_cross = obs_rows[_O_C, o], obs_rows[_O_D, o], obs_rows[_O_CEGO, o]
     # 2 |g_k| rho_k: the two same-body cross products are det W * length * width >= 0.
-    rho = get("rho", (4, m))
-    np.abs(cross, out=tmp22)
-    np.add(tmp22[:, 0], tmp22[:, 1], out=rho[:2])
-    np.add(tmp22[0], tmp22[1], out=rho[2:])
-    rho[:2] += k[0]
-    rho[2:] += k[2]
+    rho0 = abs(c02) + abs(c03) + obs_cross
+    rho1 = abs(c12) + abs(c13) + obs_cross
+    rho2 = abs(c02) + abs(c12) + ego_cross
+    rho3 = abs(c03) + abs(c13) + ego_cross
     # 2 |g_k| tau_k + |g_k|^2 = sum_i s_ki (g_k . g_i). For a mixed pair (k road user,
     # i ego) s_ki (g_k . g_i) = -copysign(1, cross) * dot; for a same-body pair
     # (cross >= 0, the second segment taking s = +1) it is -dot for the first, +dot
     # for the second segment.
-    np.copysign(1.0, cross, out=tmp22)
-    tmp22 *= dot
-    tau = get("tau", (4, m))
-    np.add(tmp22[:, 0], tmp22[:, 1], out=tau[:2])
-    np.negative(tau[:2], out=tau[:2])
-    tau[0] -= k[1]
-    tau[1] += k[1]
-    np.add(tmp22[0], tmp22[1], out=tau[2:])
-    tau[2] -= ego_dot
-    tau[3] += ego_dot
-
-    # 2 |g_k| (z . n_k) = 2 (z x g_k) and 2 |g_k| (z . u_k) = 2 (z . g_k): everything
-    # is scaled by 2 |g_k| until the one multiplication by 1 / (2 |g_k|) below.
-    across_z = get("across_z", (4, m))
-    along_z = get("along_z", (4, m))
-    z *= 2.0
-    np.multiply(seg_y, z[0], out=across_z)
-    np.multiply(seg_x, z[1], out=tmp)
-    across_z -= tmp
-    np.multiply(seg_x, z[0], out=along_z)
-    np.multiply(seg_y, z[1], out=tmp)
-    along_z += tmp
-
-    h = get("h", (8, m))
-    t1 = get("t1", (8, m))
-    t2 = get("t2", (8, m))
-    np.add(rho, across_z, out=h[:4])
-    np.subtract(rho, across_z, out=h[4:])
-    np.add(tau, along_z, out=t1[:4])
-    np.subtract(tau, along_z, out=t1[4:])
-    # Edges k and k + 4 share |g_k|: view (8, m) as (2, 4, m) to scale both at once.
-    h_pairs = h.reshape(2, 4, m)
-    h_pairs *= half_inv
-    t1_pairs = t1.reshape(2, 4, m)
-    t1_pairs *= half_inv
-    np.multiply(seg_len, 0.5, out=tmp)
-    t1_pairs -= tmp
-    np.add(t1_pairs, seg_len, out=t2.reshape(2, 4, m))
-
-    return h, t1, t2
+    m02 = math.copysign(1.0, c02) * d02
+    m03 = math.copysign(1.0, c03) * d03
+    m12 = math.copysign(1.0, c12) * d12
+    m13 = math.copysign(1.0, c13) * d13
+    tau0 = -(m02 + m03) - obs_dot
+    tau1 = -(m12 + m13) + obs_dot
+    tau2 = (m02 + m12) - ego_dot
+    tau3 = (m03 + m13) + ego_dot
+    # 2 |g_k| (z . n_k) = 2 (z x g_k) and 2 |g_k| (z . u_k) = 2 (z . g_k): everything is
+    # scaled by 2 |g_k| until the one multiplication by 1 / (2 |g_k|).
+    z0 *= 2.0
+    z1 *= 2.0
+    h, t1, t2 = edges[0], edges[1], edges[2]
+    for k in range(4):
+        if k == 0:
+            gx, gy, rho, tau = sx0, sy0, rho0, tau0
+        elif k == 1:
+            gx, gy, rho, tau = sx1, sy1, rho1, tau1
+        elif k == 2:
+            gx, gy, rho, tau = sx2, sy2, rho2, tau2
+        else:
+            gx, gy, rho, tau = sx3, sy3, rho3, tau3
+        across = gy * z0 - gx * z1
+        along = gx * z0 + gy * z1
+        size = length[k]
+        half_inv = 0.0 if degenerate and not size > _MIN_EDGE else 0.5 / size
+        half = size * 0.5
+        h[k] = (rho + across) * half_inv
+        h[k + 4] = (rho - across) * half_inv
+        t1[k] = (tau + along) * half_inv - half
+        t1[k + 4] = (tau - along) * half_inv - half
+        t2[k] = t1[k] + size
+        t2[k + 4] = t1[k + 4] + size
 
 
-def _edge_terms(h: np.ndarray, t: np.ndarray, far: float, scratch: Scratch) -> np.ndarray:
-    """sign(h) [E(|h|, t2) - E(|h|, t1)] of edges with _H_TOL <= |h| < far.
+@kernel
+def _octagon_mass(edges: np.ndarray, far: float) -> float:
+    """Gaussian mass in [0, 1] of an octagon from its edges (``_octagon_edges``).
 
-    E(h, t) = T(h, t / h) is the standard normal mass of {X > h, 0 < Y < t X / h}
-    (negative for t < 0). For |t| <= h, T(h, |t| / h) has a <= 1; otherwise Owen's
-    reflection T(h, a) = Q(h) / 2 + Q(ah) / 2 - Q(h) Q(ah) - T(ah, 1 / a) (a > 1, h >= 0)
-    does, with ah = |t|. |t| is clamped to ``far`` (see _FAR_MIN).
+    mass = winding number - sum of the edge terms sign(h) [E(|h|, t2) - E(|h|, t1)]
+    (see polygon_gaussian_mass). An edge whose closest point is r_min from the origin
+    adds at most exp(-r_min^2 / 2) / 2: edges with r_min >= ``far`` are dropped. An
+    origin on an edge's line (|h| < _ON_LINE) makes that edge's triangle degenerate (it
+    counts 0) and the winding number the sum of the other edges' wedge angles.
+    """
+    h, t1, t2 = edges[0], edges[1], edges[2]
+    lowest = np.inf
+    lowest_h2 = np.inf
+    for k in range(8):
+        lowest = min(lowest, h[k])
+        lowest_h2 = min(lowest_h2, h[k] * h[k])
+    tol2 = _ON_LINE * _ON_LINE
+    if lowest_h2 < tol2:
+        # Wedge angles of the edges off the origin's line (see _winding).
+        winding = 0.0
+        for k in range(8):
+            if h[k] * h[k] >= tol2:
+                wedge = math.atan(t2[k] / abs(h[k])) - math.atan(t1[k] / abs(h[k]))
+                winding += math.copysign(wedge, h[k])
+        winding /= _TWO_PI
+    else:
+        winding = 1.0 if lowest > 0.0 else 0.0
+    total = 0.0
+    far2 = far * far
+    for k in range(8):
+        h2 = h[k] * h[k]
+        nearest = max(min(t2[k], 0.0), t1[k])  # the edge point nearest to the foot of h
+        if nearest * nearest + h2 < far2 and h2 >= tol2:
+            abs_h = abs(h[k])
+            tail_h = _upper_tail(abs_h)
+            term = _edge_endpoint(abs_h, tail_h, t2[k], far) - _edge_endpoint(abs_h, tail_h, t1[k], far)
+            total += math.copysign(term, h[k])
+    return min(max(winding - total, 0.0), 1.0)
+
+
+@kernel
+def _gate_and_integrate(
+    obs_rows: np.ndarray,
+    ego_rows: np.ndarray,
+    n_obs: int,
+    n_t: int,
+    start: int,
+    stop: int,
+    degenerate: bool,
+    far: float,
+    probability: np.ndarray,
+    mean_overlap: np.ndarray,
+) -> None:
+    """Gate trajectories ``start:stop`` against every (obs, t) and integrate the survivors.
 
     Args:
-        h: Signed edge distances, shape (n,).
-        t: Edge start and end coordinates t1, t2, shape (2, n).
-        far: clamp for |t| [whitened units], <= _FAR_MAX.
-
-    Returns:
-        The terms, shape (n,), a scratch view.
-
+        obs_rows: the per-(obs, t) table, shape (_O_ROWS, n_obs * n_t).
+        ego_rows: the per-(traj, t) table, shape (_E_ROWS, n_traj * n_t).
+        n_obs: number of road users.
+        n_t: number of steps.
+        start: first trajectory of the block.
+        stop: one past its last trajectory.
+        degenerate: a footprint has a zero length or width.
+        far: edges farther than this from the mean are dropped [whitened units].
+        probability: output, shape (n_traj, n_obs, n_t), rows ``start:stop`` written
+            where the gate lets a triple through (the rest stays 0).
+        mean_overlap: output, same shape: the mean lies in the closed octagon.
     """
-    n = h.size
-    get = scratch.get
-    # x rows: |h|, then |t1|, |t2| clamped; their upper normal tails in one call.
-    x = get("tail_x", (3, n))
-    np.abs(h, out=x[0])
-    np.abs(t, out=x[1:])
-    np.minimum(x[1:], far, out=x[1:])
-    tail = _upper_tail(x, scratch)
-    ah, at = x[0], x[1:]
-    big = get("owens_h", (2, n), _OWENS_DTYPE)
-    small = get("owens_a", (2, n), _OWENS_DTYPE)
-    np.maximum(at, ah, out=big, casting="same_kind")
-    np.minimum(at, ah, out=small, casting="same_kind")
-    small /= big
-    owens = get("owens", (2, n))
-    owens[...] = _owens_t_unit(big, small, scratch)
-    # Reflected value Q(h) / 2 + Q(t) (1/2 - Q(h)) - T(t, h / t) where |t| > |h|.
-    reflected = get("reflected", (2, n))
-    half_minus = get("half_minus", (n,))
-    np.subtract(0.5, tail[0], out=half_minus)
-    np.multiply(tail[1:], half_minus, out=reflected)
-    np.multiply(tail[0], 0.5, out=half_minus)
-    reflected += half_minus
-    reflected -= owens
-    flip = get("flip", (2, n), np.bool_)
-    np.greater(at, ah, out=flip)
-    np.copyto(owens, reflected, where=flip)
-    np.copysign(owens, t, out=owens)
-    terms = get("terms", (n,))
-    np.subtract(owens[1], owens[0], out=terms)
-    np.copysign(terms, h, out=terms)
-    return terms
-
-
-def _owens_t_unit(h: np.ndarray, a: np.ndarray, scratch: Scratch) -> np.ndarray:
-    """Owen's T(h, a) for h >= 0 and 0 <= a <= 1 (see _GL_S2), in the dtype of ``h``.
-
-    Args:
-        h: shape (2, n).
-        a: shape (2, n).
-
-    Returns:
-        T, shape (2, n), a scratch view.
-
-    """
-    shape, dtype = h.shape, h.dtype.type
-    get = scratch.get
-    a2 = get("owens_a2", shape, dtype)
-    half_h2 = get("owens_q", shape, dtype)
-    y = get("owens_y", shape, dtype)
-    term = get("owens_term", shape, dtype)
-    total = get("owens_total", shape, dtype)
-    np.multiply(a, a, out=a2)
-    np.multiply(h, h, out=half_h2)
-    half_h2 *= -0.5
-    total.fill(0.0)
-    for s2, weight in zip(_GL_S2, _GL_W, strict=True):
-        # exp(-h^2 (1 + a^2 s^2) / 2) / (1 + a^2 s^2), weighted.
-        np.multiply(a2, s2, out=y)
-        y += 1.0
-        np.multiply(half_h2, y, out=term)
-        np.exp(term, out=term)
-        term /= y
-        term *= weight
-        total += term
-    total *= a
-    return total
-
-
-def _upper_tail(x: np.ndarray, scratch: Scratch) -> np.ndarray:
-    """Q(x) = P(Z > x) for 0 <= x <= _FAR_MAX by linear interpolation (see _Q_STEP); a scratch view."""
-    get = scratch.get
-    node = get("tail_node", x.shape)
-    index = get("tail_index", x.shape, np.intp)
-    out = get("tail_out", x.shape)
-    np.multiply(x, 1.0 / _Q_STEP, out=node)
-    index[...] = node  # truncation = floor for x >= 0
-    node -= index
-    np.take(_Q_SLOPE, index, out=out)
-    node *= out
-    np.take(_Q_TABLE, index, out=out)
-    out += node
-    return out
+    edges = np.empty((4, 8))
+    for traj in range(start, stop):
+        for obs in range(n_obs):
+            for step in range(n_t):
+                o = obs * n_t + step
+                e = traj * n_t + step
+                dx = ego_rows[0, e] - obs_rows[_O_MX, o]
+                dy = ego_rows[1, e] - obs_rows[_O_MY, o]
+                # reach^2 is inf without a gate, which keeps every triple.
+                if dx * dx + dy * dy <= obs_rows[_O_REACH2, o]:
+                    _octagon_edges(obs_rows, o, ego_rows, e, degenerate, edges)
+                    lowest = np.inf
+                    for k in range(8):
+                        lowest = min(lowest, edges[0, k])
+                    # Touching counts: on the inner side of every edge line, within _H_TOL.
+                    mean_overlap[traj, obs, step] = lowest > -_H_TOL
+                    probability[traj, obs, step] = _octagon_mass(edges, far)

@@ -206,7 +206,7 @@ class Planner:
         ego_mass: [kg].
         predictor: predicts the other road users every cycle (any ``Predictor``);
             None builds the one named by ``config.prediction.model``.
-        workers: threads and scratch buffers of the risk kernels; None makes one with
+        workers: threads of the risk kernels; None makes one with
             ``ETHICAL_PLANNER_THREADS`` threads.
     """
 

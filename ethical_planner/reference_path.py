@@ -1,12 +1,20 @@
-"""Arc-length parameterised, smooth reference path and Frenet <-> Cartesian conversion."""
+"""Arc-length parameterised, smooth reference path and Frenet <-> Cartesian conversion.
+
+The pose of the path at an arc length, and the Cartesian states of Frenet motions along
+it (``cartesian_states``), are compiled kernels (``ethical_planner.jit``); both read the
+path's samples by linear interpolation with exactly the arithmetic of ``numpy.interp``.
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
+
+from ethical_planner.jit import kernel
 
 #: Spacing of the dense internal resampling [m].
 _RESAMPLE_STEP_M = 0.25
@@ -97,15 +105,13 @@ class ReferencePath:
             ends the path continues straight.
         """
         s = np.asarray(s, dtype=float)
-        s_clipped = np.clip(s, 0.0, self.s[-1])
-        beyond = s - s_clipped  # non-zero only outside [0, length]
-        theta = np.interp(s_clipped, self.s, self.theta)
-        x = np.interp(s_clipped, self.s, self.x) + beyond * np.cos(theta)
-        y = np.interp(s_clipped, self.s, self.y) + beyond * np.sin(theta)
-        inside = beyond == 0.0
-        kappa = np.where(inside, np.interp(s_clipped, self.s, self.kappa), 0.0)
-        dkappa = np.where(inside, np.interp(s_clipped, self.s, self.dkappa), 0.0)
-        return x, y, theta, kappa, dkappa
+        out = np.empty((5, s.size))
+        _evaluate_path(np.ascontiguousarray(s).reshape(-1), *self._samples(), out)
+        return tuple(row.reshape(s.shape) for row in out)
+
+    def _samples(self) -> tuple[np.ndarray, ...]:
+        """The sample arrays the kernels read: s, x, y, theta, kappa, dkappa."""
+        return self.s, self.x, self.y, self.theta, self.kappa, self.dkappa
 
     def heading(self, s: np.ndarray | float) -> np.ndarray:
         """Path heading [rad] at arc length ``s``."""
@@ -153,3 +159,175 @@ class ReferencePath:
             best_s = np.where(better, self.s[start] + along, best_s)
             best_d = np.where(better, np.copysign(dist, lateral), best_d)
         return best_s.reshape(shape), best_d.reshape(shape)
+
+
+def cartesian_states(
+    lon: np.ndarray, lon_row: np.ndarray, lat: np.ndarray, path: ReferencePath
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cartesian states of Frenet motions along ``path``, with exact derivatives.
+
+    Velocity and acceleration in the path's (tangent, normal) frame follow from s, d and
+    their time derivatives and the path's curvature kappa and its derivative:
+    along = s' (1 - kappa d), across = d', acc_t = along' - across s' kappa,
+    acc_n = along s' kappa + d''; speed |v| = hypot(along, across), heading
+    theta + atan2(across, along), curvature (along acc_n - across acc_t) / |v|^3 and
+    tangential acceleration (along acc_t + across acc_n) / |v|. Below 1 mm/s a body
+    stands: its curvature is 0, its acceleration s'', and it keeps the heading it
+    stopped with (atan2 of two rounding residues is no heading); one standing from the
+    start points along the path.
+
+    Motions that share their longitudinal part (``lon_row``) share the path's pose,
+    evaluated once per distinct longitudinal motion.
+
+    Args:
+        lon: distinct longitudinal motions, s and its first three time derivatives,
+            shape (4, r, n_t).
+        lon_row: the longitudinal motion of each of the n motions, indices into ``lon``,
+            shape (n,).
+        lat: d and its first three time derivatives, shape (4, n, n_t).
+        path: the reference path.
+
+    Returns:
+        (x, y, yaw, v, a, kappa), each of shape (n, n_t): centre [m], heading [rad],
+        speed [m/s], tangential acceleration [m/s^2], curvature [1/m].
+    """
+    lon = np.ascontiguousarray(lon, dtype=float)
+    lat = np.ascontiguousarray(lat, dtype=float)
+    lon_row = np.ascontiguousarray(lon_row, dtype=np.int64)
+    in_range = not lon_row.size or 0 <= lon_row.min() <= lon_row.max() < lon.shape[1]
+    if lon_row.shape != lat.shape[1:2] or not in_range:
+        raise ValueError(
+            f"lon_row must index the {lon.shape[1]} longitudinal motions, one per lateral motion"
+        )
+    out = np.empty((6,) + lat.shape[1:])
+    _cartesian_states(lon, lon_row, lat, *path._samples(), out)
+    return out[0], out[1], out[2], out[3], out[4], out[5]
+
+
+# --- compiled kernels ------------------------------------------------------------------------
+
+
+@kernel
+def _sample_index(value: float, samples: np.ndarray) -> int:
+    """Largest j with samples[j] <= value, for samples[0] <= value <= samples[-1].
+
+    The samples are equally spaced up to rounding, so a guess from the spacing is moved
+    by at most a step or two; the result is the index ``numpy.interp`` works with.
+    """
+    last = samples.size - 1
+    j = min(int(value * last / samples[last]), last) if samples[last] > 0.0 else 0
+    while j > 0 and samples[j] > value:
+        j -= 1
+    while j < last and samples[j + 1] <= value:
+        j += 1
+    return j
+
+
+@kernel
+def _interpolate(value: float, j: int, samples: np.ndarray, values: np.ndarray) -> float:
+    """``numpy.interp(value, samples, values)`` at the sample index j of ``_sample_index``."""
+    if j == samples.size - 1 or samples[j] == value:
+        return values[j]
+    slope = (values[j + 1] - values[j]) / (samples[j + 1] - samples[j])
+    return slope * (value - samples[j]) + values[j]
+
+
+@kernel
+def _pose_at(
+    value: float,
+    path_s: np.ndarray,
+    path_x: np.ndarray,
+    path_y: np.ndarray,
+    path_theta: np.ndarray,
+    path_kappa: np.ndarray,
+    path_dkappa: np.ndarray,
+) -> tuple[float, float, float, float, float]:
+    """(x, y, theta, kappa, dkappa) at arc length ``value``; straight beyond the ends."""
+    clipped = min(max(value, 0.0), path_s[path_s.size - 1])
+    beyond = value - clipped
+    j = _sample_index(clipped, path_s)
+    theta = _interpolate(clipped, j, path_s, path_theta)
+    x = _interpolate(clipped, j, path_s, path_x)
+    y = _interpolate(clipped, j, path_s, path_y)
+    if beyond != 0.0:
+        return x + beyond * math.cos(theta), y + beyond * math.sin(theta), theta, 0.0, 0.0
+    kappa = _interpolate(clipped, j, path_s, path_kappa)
+    return x, y, theta, kappa, _interpolate(clipped, j, path_s, path_dkappa)
+
+
+@kernel
+def _evaluate_path(
+    s: np.ndarray,
+    path_s: np.ndarray,
+    path_x: np.ndarray,
+    path_y: np.ndarray,
+    path_theta: np.ndarray,
+    path_kappa: np.ndarray,
+    path_dkappa: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Poses at arc lengths ``s`` (m,), written to ``out`` (5, m): x, y, theta, kappa, dkappa."""
+    for i in range(s.size):
+        pose = _pose_at(s[i], path_s, path_x, path_y, path_theta, path_kappa, path_dkappa)
+        for row in range(5):
+            out[row, i] = pose[row]
+
+
+@kernel
+def _cartesian_states(
+    lon: np.ndarray,
+    lon_row: np.ndarray,
+    lat: np.ndarray,
+    path_s: np.ndarray,
+    path_x: np.ndarray,
+    path_y: np.ndarray,
+    path_theta: np.ndarray,
+    path_kappa: np.ndarray,
+    path_dkappa: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Kernel of ``cartesian_states``: out (6, n, n_t) = x, y, yaw, v, a, kappa."""
+    rows, n_t = lon.shape[1], lon.shape[2]
+    # The path's pose once per distinct longitudinal motion: x, y, theta, kappa,
+    # dkappa, sin theta, cos theta.
+    pose = np.empty((7, rows, n_t))
+    for row in range(rows):
+        for step in range(n_t):
+            x_r, y_r, theta_r, kappa_r, dkappa_r = _pose_at(
+                lon[0, row, step], path_s, path_x, path_y, path_theta, path_kappa, path_dkappa
+            )
+            pose[0, row, step] = x_r
+            pose[1, row, step] = y_r
+            pose[2, row, step] = theta_r
+            pose[3, row, step] = kappa_r
+            pose[4, row, step] = dkappa_r
+            pose[5, row, step] = math.sin(theta_r)
+            pose[6, row, step] = math.cos(theta_r)
+    for traj in range(lat.shape[1]):
+        row = lon_row[traj]
+        last_moving = -1
+        for step in range(n_t):
+            theta_r, kappa_r, dkappa_r = pose[2, row, step], pose[3, row, step], pose[4, row, step]
+            s_dot, s_ddot = lon[1, row, step], lon[2, row, step]
+            d, d_dot, d_ddot = lat[0, traj, step], lat[1, traj, step], lat[2, traj, step]
+            one_minus_kd = 1.0 - kappa_r * d
+            along = s_dot * one_minus_kd
+            across = d_dot
+            # along' = s'' (1 - kappa d) - s' (kappa' s' d + kappa d')
+            along_dot = s_ddot * one_minus_kd - s_dot * ((dkappa_r * s_dot) * d + kappa_r * d_dot)
+            acc_t = along_dot - (across * s_dot) * kappa_r
+            acc_n = (along * s_dot) * kappa_r + d_ddot
+            speed = math.hypot(along, across)
+            if speed > 1e-3:
+                safe = max(speed, 1e-9)
+                out[4, traj, step] = (along * acc_t + across * acc_n) / safe
+                out[5, traj, step] = (along * acc_n - across * acc_t) / math.pow(safe, 3.0)
+                out[2, traj, step] = math.atan2(across, along) + theta_r
+                last_moving = step
+            else:
+                out[4, traj, step] = s_ddot
+                out[5, traj, step] = 0.0
+                out[2, traj, step] = out[2, traj, last_moving] if last_moving >= 0 else theta_r
+            out[0, traj, step] = pose[0, row, step] - pose[5, row, step] * d
+            out[1, traj, step] = pose[6, row, step] * d + pose[1, row, step]
+            out[3, traj, step] = speed

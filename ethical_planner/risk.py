@@ -167,7 +167,7 @@ def assess_risk(
 
     Delta-v by ``config.delta_v_model``: paper Eq. 1 or the planar impulse model
     (``ethical_planner.impulse``), whose contact comes from the two footprints.
-    ``workers`` lends its threads and scratch buffers to large problems (a planner
+    ``workers`` lends its threads to large problems (a planner
     passes its own; None makes a fresh one for this call).
     """
     workers = Workers() if workers is None else workers

@@ -21,6 +21,7 @@ arrays of shape (n_traj, n_t).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
@@ -28,7 +29,8 @@ from typing import Any
 import numpy as np
 
 from ethical_planner.config import SamplingConfig, VehicleConfig
-from ethical_planner.reference_path import ReferencePath
+from ethical_planner.jit import kernel
+from ethical_planner.reference_path import ReferencePath, cartesian_states
 from ethical_planner.road_users import KinematicState
 
 
@@ -138,6 +140,38 @@ class Candidates:
         return self.x.shape[0]
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class CandidatePart:
+    """Candidates of one family before their conversion to Cartesian states.
+
+    Candidates share longitudinal motions (a grid's depends on the end speed and the
+    horizon, not on the end offset; a braking family's on the deceleration), so each
+    distinct one is stored once and the path is evaluated once per distinct motion.
+
+    Attributes:
+        lon: distinct longitudinal motions, s and its first three time derivatives,
+            shape (4, r, n_t).
+        lon_row: the motion of each candidate, indices into ``lon``, shape (m,).
+        lat: d and its first three time derivatives of each candidate, shape (4, m, n_t).
+        end_speed, end_offset, horizon, deceleration: sampling parameters, shape (m,).
+        kind: the family.
+    """
+
+    lon: np.ndarray
+    lon_row: np.ndarray
+    lat: np.ndarray
+    end_speed: np.ndarray
+    end_offset: np.ndarray
+    horizon: np.ndarray
+    kind: CandidateKind
+    deceleration: np.ndarray
+
+    @property
+    def candidate_lon(self) -> np.ndarray:
+        """The longitudinal motion of every candidate, shape (4, m, n_t)."""
+        return self.lon[:, self.lon_row]
+
+
 def quartic_coefficients(
     s0: float, v0: float, a0: float, v_end: np.ndarray, horizon: np.ndarray
 ) -> np.ndarray:
@@ -183,10 +217,6 @@ def _polynomial_derivatives(coeffs: np.ndarray, t: np.ndarray, horizon: np.ndarr
     """Value and first three time derivatives of polynomials, held past their horizon.
 
     After t = T the motion continues with the end velocity and zero acceleration.
-    Candidates share one to three horizons, so the powers tt^p, tt = min(t, T), are
-    computed once per horizon on (n_t,) instead of per element; the sums keep their
-    order, so the results are the same to the last bit (a stopped candidate's heading,
-    atan2 of two rounding residues, depends on those bits).
 
     Args:
         coeffs: (n_traj, k) lowest power first.
@@ -196,32 +226,43 @@ def _polynomial_derivatives(coeffs: np.ndarray, t: np.ndarray, horizon: np.ndarr
     Returns:
         Shape (4, n_traj, n_t): value, first, second, third derivative.
     """
-    n, k = coeffs.shape
-    out = np.zeros((4, n, t.size))
-    degree = k - 1
-    for value in np.unique(horizon):  # one to three horizons, not per trajectory
-        rows = np.flatnonzero(horizon == value)
-        if rows[-1] - rows[0] + 1 == rows.size:  # contiguous, as sample_candidates builds them
-            rows = slice(rows[0], rows[-1] + 1)
-        tt = np.minimum(t, value)
-        powers = np.stack([tt**p for p in range(degree + 1)])  # (k, n_t)
-        c = coeffs[rows].T[:, :, None]  # (k, n, 1)
-        for order in range(4):  # four derivative orders, not a loop over data
-            if order > degree:
-                continue
-            # factor_p c_p tt^(p - order) for p = order..degree, (k - order, n, n_t),
-            # summed over p in order (a reduction over the first axis is sequential).
-            factors = np.array(
-                [np.prod(np.arange(p - order + 1, p + 1)) if order else 1.0 for p in range(order, k)]
-            )
-            terms = factors[:, None, None] * c[order:] * powers[: k - order, None, :]
-            np.add.reduce(terms, axis=0, out=out[order, rows])
-        past = t > value
-        if past.any():
-            overtime = np.maximum(t - value, 0.0)
-            out[0, rows] += out[1, rows] * overtime
-            out[2:, rows, past] = 0.0
+    out = np.empty((4, len(coeffs), t.size))
+    coeffs = np.ascontiguousarray(coeffs, dtype=float)
+    _polynomials(coeffs, np.ascontiguousarray(horizon, dtype=float), t, out)
     return out
+
+
+@kernel
+def _polynomials(coeffs: np.ndarray, horizon: np.ndarray, t: np.ndarray, out: np.ndarray) -> None:
+    """Kernel of ``_polynomial_derivatives``, out (4, n, n_t) written.
+
+    With tt = min(t, T): derivative r is sum_{p >= r} p! / (p - r)! c_p tt^(p - r), summed
+    in order of p; the powers as numpy's ``tt ** p`` computes them. Past T the value
+    grows with the end velocity and the higher derivatives are 0.
+    """
+    n, k = coeffs.shape
+    powers = np.empty(k)
+    for row in range(n):
+        end = horizon[row]
+        for step in range(t.size):
+            tt = min(t[step], end)
+            powers[0] = 1.0
+            for p in range(1, k):  # as numpy's tt ** p: tt, tt * tt, then pow
+                powers[p] = tt if p == 1 else (tt * tt if p == 2 else math.pow(tt, float(p)))
+            for order in range(4):
+                total = 0.0
+                for p in range(order, k):
+                    factor = 1.0
+                    for q in range(p - order + 1, p + 1):
+                        factor *= q
+                    term = factor * coeffs[row, p] * powers[p - order]
+                    total = term if p == order else total + term
+                out[order, row, step] = total if order < k else 0.0
+            overtime = max(t[step] - end, 0.0)
+            out[0, row, step] += out[1, row, step] * overtime
+            if t[step] > end:
+                out[2, row, step] = 0.0
+                out[3, row, step] = 0.0
 
 
 def lateral_along_arc(
@@ -320,41 +361,62 @@ def braking_motion(
     return lon, stop_distance[:, 0], t_stop[:, 0]
 
 
-def _grid_motion(
-    start: FrenetState, t: np.ndarray, config: SamplingConfig, v_max: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The paper's grid: (lon, lat, end_speed, end_offset, horizon), motions (4, n, n_t)."""
+def _grid_motion(start: FrenetState, t: np.ndarray, config: SamplingConfig, v_max: float) -> CandidatePart:
+    """The paper's grid: every end speed x end offset x horizon.
+
+    The longitudinal quartic depends on (end speed, horizon) and, above the low speed,
+    the lateral quintic on (end offset, horizon): each is evaluated once per distinct
+    pair and copied to the candidates that share it.
+    """
     v0 = max(start.s_dot, 0.0)
     speeds, offsets, horizons = [], [], []
+    row_speeds, row_horizons = [], []
+    d_grid = np.linspace(config.d_min, config.d_max, config.n_offsets)
     for horizon in config.horizons:  # a few horizons, not per trajectory
         lo = max(0.0, v0 - config.max_end_deceleration * horizon)
         hi = min(v_max, v0 + config.max_end_acceleration * horizon)
         v_grid = np.linspace(lo, max(hi, lo), config.n_speeds)
-        d_grid = np.linspace(config.d_min, config.d_max, config.n_offsets)
         vv, dd = np.meshgrid(v_grid, d_grid, indexing="ij")
         speeds.append(vv.ravel())
         offsets.append(dd.ravel())
         horizons.append(np.full(vv.size, horizon))
+        row_speeds.append(v_grid)
+        row_horizons.append(np.full(v_grid.size, horizon))
     end_speed = np.concatenate(speeds)
     end_offset = np.concatenate(offsets)
     horizon = np.concatenate(horizons)
+    n_h, n_v, n_d = len(config.horizons), config.n_speeds, config.n_offsets
+    # Speed index varies slower than the offset index within a horizon.
+    per_horizon = np.repeat(np.arange(n_v), n_d)
+    lon_row = (np.arange(n_h)[:, None] * n_v + per_horizon[None, :]).ravel()
+    row_horizon = np.concatenate(row_horizons)
     lon = _polynomial_derivatives(
-        quartic_coefficients(start.s, start.s_dot, start.s_ddot, end_speed, horizon), t, horizon
+        quartic_coefficients(start.s, start.s_dot, start.s_ddot, np.concatenate(row_speeds), row_horizon),
+        t,
+        row_horizon,
     )
     if v0 < config.low_speed:
         # Werling's low-speed mode: the lateral shift follows the distance travelled.
-        at_horizon = np.minimum(np.rint(horizon / config.dt).astype(int), len(t) - 1)
-        distance = lon[0][np.arange(len(horizon)), at_horizon] - start.s
-        lat = lateral_along_arc(start, end_offset, distance, lon)
+        at_horizon = np.minimum(np.rint(row_horizon / config.dt).astype(int), len(t) - 1)
+        distance = lon[0][np.arange(len(row_horizon)), at_horizon] - start.s
+        lat = lateral_along_arc(start, end_offset, distance[lon_row], lon[:, lon_row])
     else:
-        lat = _polynomial_derivatives(
-            quintic_coefficients(start.d, start.d_dot, start.d_ddot, end_offset, horizon), t, horizon
+        lat_horizon = np.repeat(np.asarray(config.horizons, dtype=float), n_d)
+        lat_rows = _polynomial_derivatives(
+            quintic_coefficients(start.d, start.d_dot, start.d_ddot, np.tile(d_grid, n_h), lat_horizon),
+            t,
+            lat_horizon,
         )
-    return lon, lat, end_speed, end_offset, horizon
+        lat_row = (np.arange(n_h)[:, None] * n_d + np.tile(np.arange(n_d), n_v)[None, :]).ravel()
+        lat = lat_rows[:, lat_row]
+    zeros = np.zeros(len(horizon))
+    return CandidatePart(lon, lon_row, lat, end_speed, end_offset, horizon, CandidateKind.GRID, zeros)
 
 
-def _brake_motion(start: FrenetState, t: np.ndarray, config: SamplingConfig, vehicle: VehicleConfig) -> tuple:
-    """The braking family as a part for ``_assemble``.
+def _brake_motion(
+    start: FrenetState, t: np.ndarray, config: SamplingConfig, vehicle: VehicleConfig
+) -> CandidatePart:
+    """The braking family.
 
     Every deceleration (``config.brake_decelerations`` below the emergency deceleration,
     and the emergency deceleration) x every end offset (the grid's and the current one)
@@ -371,9 +433,10 @@ def _brake_motion(start: FrenetState, t: np.ndarray, config: SamplingConfig, veh
     which = np.repeat(np.arange(n_b), n_d * n_f)  # deceleration varies slowest
     d_end = np.tile(np.repeat(offsets, n_f), n_b)
     fraction = np.tile(fractions, n_b * n_d)
-    lon = lon_b[:, which]
-    lat = lateral_along_arc(start, d_end, fraction * stop_distance[which], lon)
-    return lon, lat, np.zeros(len(which)), d_end, stop_time[which], CandidateKind.BRAKE, decels[which]
+    lat = lateral_along_arc(start, d_end, fraction * stop_distance[which], lon_b[:, which])
+    zeros = np.zeros(len(which))
+    kind = CandidateKind.BRAKE
+    return CandidatePart(lon_b, which, lat, zeros, d_end, stop_time[which], kind, decels[which])
 
 
 def sample_candidates(
@@ -402,8 +465,7 @@ def sample_candidates(
     dt = config.dt
     n_t = int(round(max(config.horizons) / dt)) + 1
     t = np.arange(n_t) * dt
-    lon, lat, end_speed, end_offset, horizon = _grid_motion(start, t, config, vehicle.v_max)
-    parts = [(lon, lat, end_speed, end_offset, horizon, CandidateKind.GRID, np.zeros(len(horizon)))]
+    parts = [_grid_motion(start, t, config, vehicle.v_max)]
     if config.brake_candidates:
         parts.append(_brake_motion(start, t, config, vehicle))
     if previous is not None:
@@ -424,7 +486,8 @@ def emergency_braking(
     decel = np.array([vehicle.emergency_deceleration])
     lon, stop_distance, stop_time = braking_motion(start, decel, t, vehicle.max_jerk)
     lat = lateral_along_arc(start, np.array([start.d]), stop_distance, lon)
-    part = (lon, lat, np.zeros(1), np.array([start.d]), stop_time, CandidateKind.EMERGENCY, decel)
+    row, kind = np.zeros(1, dtype=int), CandidateKind.EMERGENCY
+    part = CandidatePart(lon, row, lat, np.zeros(1), np.array([start.d]), stop_time, kind, decel)
     return _assemble(t, path, [part])
 
 
@@ -504,7 +567,7 @@ class PreviousPlan:
 
 def continue_plan(
     previous: PreviousPlan, start: FrenetState, t: np.ndarray, max_deviation: float
-) -> tuple | None:
+) -> CandidatePart | None:
     """The previous plan from where the ego is on it, over the time grid ``t``.
 
     The time tau since the plan's start is where its s(t) reaches the ego's s; the plan
@@ -512,7 +575,7 @@ def continue_plan(
     after its end (constant speed along the path, constant offset).
 
     Returns:
-        A family part for ``_assemble`` with one candidate, or None if the ego is further
+        A part with one candidate, or None if the ego is further
         than ``max_deviation`` from the plan (position [m] or speed [m/s]) or the time
         steps differ.
     """
@@ -545,8 +608,9 @@ def continue_plan(
     if abs(lat[0, 0] - start.d) > max_deviation or abs(lon[1, 0] - start.s_dot) > max_deviation:
         return None
     kept = previous.parameters
-    return (
+    return CandidatePart(
         lon[:, None, :],
+        np.zeros(1, dtype=int),
         lat[:, None, :],
         np.array([kept.end_speed]),
         np.array([kept.end_offset]),
@@ -576,135 +640,50 @@ def frenet_to_candidates(
         end_offset: (n,) end offsets [m], kept.
         horizon: (n,) horizons [s], kept.
     """
-    part = (lon, lat, end_speed, end_offset, horizon, CandidateKind.GRID, np.zeros(lon.shape[1]))
+    n, kind = lon.shape[1], CandidateKind.GRID
+    part = CandidatePart(lon, np.arange(n), lat, end_speed, end_offset, horizon, kind, np.zeros(n))
     return _assemble(t, path, [part])
 
 
-#: Trajectories converted per block (see _assemble).
-_BLOCK = 256
-_STATE_NAMES = ("x", "y", "yaw", "v", "a", "kappa", "s", "d", "s_dot", "jerk_lon", "jerk_lat")
 #: Below this speed [m/s] the ego stands: the braking family collapses to one candidate.
 _STANDING_SPEED = 0.05
 #: Shorter lateral shifts [m] hold the offset (see lateral_along_arc).
 _MIN_LATERAL_DISTANCE = 0.5
 
 
-def _assemble(t: np.ndarray, path: ReferencePath, parts: list[tuple]) -> Candidates:
-    """Concatenate family parts and convert them to Cartesian candidates.
-
-    Each part is (lon (4, m, n_t), lat (4, m, n_t), end_speed, end_offset, horizon,
-    kind, deceleration), the per-candidate arrays of shape (m,).
-    """
-    lon = np.concatenate([p[0] for p in parts], axis=1)
-    lat = np.concatenate([p[1] for p in parts], axis=1)
-    end_speed, end_offset, horizon = (np.concatenate([p[i] for p in parts]) for i in (2, 3, 4))
-    kind = np.concatenate([np.full(p[0].shape[1], int(p[5]), dtype=np.int8) for p in parts])
-    deceleration = np.concatenate([p[6] for p in parts])
-    n = lon.shape[1]
-    out = {name: np.empty(n if name.startswith("jerk") else (n, len(t))) for name in _STATE_NAMES}
-    # Blocks of trajectories, not single ones: every temporary then stays small enough to
-    # be reused by the allocator instead of page-faulting in a fresh mapping.
-    for first in range(0, n, _BLOCK):
-        block = slice(first, first + _BLOCK)
-        _cartesian_states(t, lon[:, block], lat[:, block], path, {k: v[block] for k, v in out.items()})
+def _assemble(t: np.ndarray, path: ReferencePath, parts: list[CandidatePart]) -> Candidates:
+    """Concatenate family parts and convert them to Cartesian candidates."""
+    lon_rows = np.concatenate([p.lon for p in parts], axis=1)
+    offsets = np.cumsum([0] + [p.lon.shape[1] for p in parts[:-1]])
+    lon_row = np.concatenate([p.lon_row + offset for p, offset in zip(parts, offsets, strict=True)])
+    lat = np.concatenate([p.lat for p in parts], axis=1)
+    end_speed, end_offset, horizon, deceleration = (
+        np.concatenate([getattr(p, name) for p in parts])
+        for name in ("end_speed", "end_offset", "horizon", "deceleration")
+    )
+    kind = np.concatenate([np.full(p.lat.shape[1], int(p.kind), dtype=np.int8) for p in parts])
+    lon = lon_rows[:, lon_row]
+    x, y, yaw, v, a, kappa = cartesian_states(lon_rows, lon_row, lat, path)
+    dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
+    weights = np.full(len(t), dt)  # rectangle rule over the samples
     return Candidates(
         t=t,
+        x=x,
+        y=y,
+        yaw=yaw,
+        v=v,
+        a=a,
+        kappa=kappa,
+        s=lon[0],
+        d=lat[0],
+        s_dot=lon[1],
         end_speed=end_speed,
         end_offset=end_offset,
         horizon=horizon,
         kind=kind,
         deceleration=deceleration,
+        jerk_lon=np.square(lon[3]) @ weights,
+        jerk_lat=np.square(lat[3]) @ weights,
         lon=lon,
         lat=lat,
-        **out,
     )
-
-
-def _cartesian_states(
-    t: np.ndarray, lon: np.ndarray, lat: np.ndarray, path: ReferencePath, out: dict[str, np.ndarray]
-) -> None:
-    """Cartesian states of Frenet motions, written into ``out`` (see _empty_states).
-
-    Args:
-        t: (n_t,) [s].
-        lon: (4, n, n_t) s and its first three time derivatives.
-        lat: (4, n, n_t) d and its first three time derivatives.
-        path: reference path.
-        out: arrays of shape (n, n_t), jerks (n,), written.
-    """
-    s, s_dot, s_ddot, s_dddot = lon
-    d, d_dot, d_ddot, d_dddot = lat
-    dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
-    x_r, y_r, theta_r, kappa_r, dkappa_r = path.evaluate(s)
-
-    # Velocity and acceleration in the path's (tangent, normal) frame, exact. Written
-    # with in-place operations (every temporary of this size costs page faults) but
-    # the same operations in the same order as the plain formulas, so the results are
-    # the same to the last bit (see _polynomial_derivatives).
-    one_minus_kd = kappa_r * d
-    np.subtract(1.0, one_minus_kd, out=one_minus_kd)
-    along = s_dot * one_minus_kd
-    across = d_dot
-    # along_dot = s'' (1 - kappa d) - s' (kappa' s' d + kappa d')
-    along_dot = dkappa_r * s_dot
-    along_dot *= d
-    tmp = kappa_r * d_dot
-    along_dot += tmp
-    np.multiply(s_dot, along_dot, out=along_dot)
-    np.multiply(s_ddot, one_minus_kd, out=tmp)
-    np.subtract(tmp, along_dot, out=along_dot)
-    # acc_t = along_dot - across s' kappa, acc_n = along s' kappa + d''
-    acc_t = across * s_dot
-    acc_t *= kappa_r
-    np.subtract(along_dot, acc_t, out=acc_t)
-    acc_n = along * s_dot
-    acc_n *= kappa_r
-    acc_n += d_ddot
-    speed = out["v"]
-    np.hypot(along, across, out=speed)
-    safe = np.maximum(speed, 1e-9)
-    moving = speed > 1e-3
-    # kappa = (along acc_n - across acc_t) / |v|^3, a = (along acc_t + across acc_n) / |v|
-    kappa = out["kappa"]
-    np.multiply(along, acc_n, out=kappa)
-    np.multiply(across, acc_t, out=tmp)
-    kappa -= tmp
-    accel = out["a"]
-    np.multiply(along, acc_t, out=accel)
-    np.multiply(across, acc_n, out=tmp)
-    accel += tmp
-    accel /= safe
-    np.power(safe, 3, out=tmp)
-    kappa /= tmp
-    np.logical_not(moving, out=moving)
-    kappa[moving] = 0.0
-    np.copyto(accel, s_ddot, where=moving)
-
-    x = out["x"]
-    np.sin(theta_r, out=x)
-    x *= d
-    np.subtract(x_r, x, out=x)
-    y = out["y"]
-    np.cos(theta_r, out=y)
-    y *= d
-    y += y_r
-    yaw = out["yaw"]
-    np.arctan2(across, along, out=yaw)
-    yaw += theta_r
-    standing = moving  # inverted above
-    if standing.any():
-        # A standing car keeps the heading it stopped with (atan2 of two rounding
-        # residues is no heading); one standing from the start points along the path.
-        steps = np.broadcast_to(np.arange(yaw.shape[1]), yaw.shape)
-        last_moving = np.maximum.accumulate(np.where(standing, -1, steps), axis=1)
-        rows = np.arange(yaw.shape[0])[:, None]
-        held = yaw[rows, np.maximum(last_moving, 0)]
-        yaw[...] = np.where(standing, np.where(last_moving >= 0, held, theta_r), yaw)
-    out["s"][...] = s
-    out["d"][...] = d
-    out["s_dot"][...] = s_dot
-    weights = np.full(len(t), dt)  # rectangle rule over the samples
-    np.square(s_dddot, out=tmp)
-    np.matmul(tmp, weights, out=out["jerk_lon"])
-    np.square(d_dddot, out=tmp)
-    np.matmul(tmp, weights, out=out["jerk_lat"])

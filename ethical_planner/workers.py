@@ -1,10 +1,9 @@
-"""A small executor for numpy work: helper threads and per-thread scratch buffers.
+"""A small executor for the planner's kernels: helper threads.
 
-The hot kernels (collision probability, harm) spend their time inside numpy loops,
-which release the GIL, so a second thread pays off on large problems. A ``Workers``
-object is owned by whoever plans (a ``Planner`` holds one); it starts its helper
-threads on first use and keeps reusable scratch arrays per thread, so nothing is
-shared through module globals.
+The hot kernels (collision probability, harm) run in compiled code or numpy loops that
+release the GIL, so a second thread pays off on large problems. A ``Workers`` object is
+owned by whoever plans (a ``Planner`` holds one) and starts its helper threads on first
+use, so nothing is shared through module globals.
 
 Thread count: ``ETHICAL_PLANNER_THREADS`` if set, else min(2, CPU count), and 1 inside
 a worker process of a process pool (the other cores are busy with the other workers).
@@ -13,15 +12,12 @@ Results never depend on it: jobs write disjoint parts of their outputs.
 
 from __future__ import annotations
 
-import math
 import multiprocessing
 import os
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TypeVar
-
-import numpy as np
 
 _T = TypeVar("_T")
 _J = TypeVar("_J")
@@ -52,44 +48,8 @@ def threads_from_environment() -> int:
     return min(2, os.cpu_count() or 1)
 
 
-class Scratch(threading.local):
-    """Scratch buffers of the calling thread, reused across calls.
-
-    Temporaries of a few hundred kB are slow to allocate: glibc returns them to the
-    kernel on free and every new one page-faults (up to 10x the cost of the arithmetic
-    on the VMs measured). Kernels write into these buffers instead (about 10 MB per
-    thread for the collision probability, 40 MB on the threaded path).
-    """
-
-    def __init__(self) -> None:
-        self.buffers: dict[tuple[str, type], np.ndarray] = {}
-        self.views: dict[tuple[str, tuple[int, ...], type], np.ndarray] = {}
-
-    def get(self, name: str, shape: tuple[int, ...], dtype: type = np.float64) -> np.ndarray:
-        """Return a C-contiguous scratch array of ``shape``; its contents are undefined.
-
-        Two calls with the same ``name`` share memory: a kernel uses one name per live
-        temporary.
-        """
-        key = (name, shape, dtype)
-        view = self.views.get(key)
-        if view is None:
-            size = math.prod(shape)
-            buffer = self.buffers.get((name, dtype))
-            if buffer is None or buffer.size < size:
-                # Grow with headroom; views of the old buffer are dropped with it.
-                buffer = np.empty(max(size + size // 4, 1), dtype=dtype)
-                self.buffers[(name, dtype)] = buffer
-                self.views = {k: v for k, v in self.views.items() if k[0] != name or k[2] != dtype}
-            if len(self.views) > 4096:
-                self.views.clear()
-            view = buffer[:size].reshape(shape)
-            self.views[key] = view
-        return view
-
-
 class Workers:
-    """Helper threads (``threads - 1`` of them, started on first use) and scratch buffers.
+    """Helper threads (``threads - 1`` of them, started on first use).
 
     Args:
         threads: threads to use, the calling one included; None reads
@@ -104,8 +64,6 @@ class Workers:
         if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
             raise ValueError(f"Workers.threads must be an integer >= 1, got {threads!r}")
         self.threads = threads
-        #: Scratch buffers of the calling thread (a thread-local object).
-        self.scratch = Scratch()
         self._pool: ThreadPoolExecutor | None = None
         self._lock = threading.Lock()
 
@@ -165,4 +123,4 @@ class Workers:
                 self._pool = None
 
 
-__all__ = ["THREADS_VARIABLE", "Scratch", "Workers", "threads_from_environment"]
+__all__ = ["THREADS_VARIABLE", "Workers", "threads_from_environment"]

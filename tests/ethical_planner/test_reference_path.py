@@ -40,3 +40,26 @@ def test_straight_extension_beyond_the_ends():
 def test_bad_polylines_are_rejected(points, match):
     with pytest.raises(ValueError, match=match):
         ReferencePath.from_polyline(points)
+
+
+def test_evaluate_is_linear_interpolation_of_the_samples_as_numpy_does_it():
+    # The compiled lookup must give numpy.interp's numbers to the bit (the sampling's
+    # standing-heading rule reads rounding residues), at the samples, between them and
+    # at both ends; beyond the ends the path goes on straight with zero curvature.
+    x = np.linspace(0, 100, 30)
+    path = ReferencePath.from_polyline(np.c_[x, 3 * np.sin(x / 30)])
+    rng = np.random.default_rng(3)
+    s = np.concatenate(
+        [rng.uniform(0, path.length, 5000), path.s, path.s[1:] - 1e-12, [-4.0, path.length + 7.0]]
+    )
+    px, py, theta, kappa, dkappa = path.evaluate(s)
+    clipped = np.clip(s, 0.0, path.length)
+    beyond = s - clipped
+    expected_theta = np.interp(clipped, path.s, path.theta)
+    np.testing.assert_array_equal(theta, expected_theta)
+    np.testing.assert_array_equal(px, np.interp(clipped, path.s, path.x) + beyond * np.cos(expected_theta))
+    np.testing.assert_array_equal(py, np.interp(clipped, path.s, path.y) + beyond * np.sin(expected_theta))
+    inside = beyond == 0.0
+    np.testing.assert_array_equal(kappa, np.where(inside, np.interp(clipped, path.s, path.kappa), 0.0))
+    np.testing.assert_array_equal(dkappa, np.where(inside, np.interp(clipped, path.s, path.dkappa), 0.0))
+    assert path.evaluate(np.array([[1.0, 2.0]]))[0].shape == (1, 2)  # any shape in, same shape out

@@ -251,12 +251,12 @@ def test_continuation_is_the_previous_plan_shifted_and_held():
     state = KinematicState(first.x[index, k], first.y[index, k], first.yaw[index, k], first.v[index, k])
     start = frenet_state(state, path)
     part = continue_plan(previous, start, first.t, max_deviation=0.5)
-    assert part is not None and part[5] is CandidateKind.CONTINUATION
-    lon, lat = part[0][:, 0], part[1][:, 0]
+    assert part is not None and part.kind is CandidateKind.CONTINUATION
+    lon, lat = part.candidate_lon[:, 0], part.lat[:, 0]
     np.testing.assert_allclose(lon[:, : len(first.t) - k], first.lon[:, index, k:], atol=1e-6)
     np.testing.assert_allclose(lat[:, : len(first.t) - k], first.lat[:, index, k:], atol=1e-6)
     np.testing.assert_allclose(lat[0, -k:], 3.5, atol=1e-9)  # held at its end offset
-    assert part[4][0] == pytest.approx(0.7)  # remaining horizon
+    assert part.horizon[0] == pytest.approx(0.7)  # remaining horizon
     # An ego far from the plan gets no continuation.
     off = frenet_state(KinematicState(state.x, state.y - 1.0, state.yaw, state.v), path)
     assert continue_plan(previous, off, first.t, max_deviation=0.5) is None
@@ -272,3 +272,20 @@ def test_emergency_braking_stops_and_holds_lane_offset():
     assert brake.x[0, -1] == pytest.approx(s_ref, abs=2e-3)
     np.testing.assert_allclose(brake.y[0], 0.5, atol=1e-9)
     assert brake.kind[0] == CandidateKind.EMERGENCY
+
+
+def test_shared_longitudinal_motions_give_the_states_of_the_expanded_ones():
+    # cartesian_states evaluates the path once per distinct longitudinal motion; indexing
+    # them must give exactly the states of the motions written out per candidate.
+    from ethical_planner.reference_path import cartesian_states
+
+    path = ReferencePath.from_polyline([[0, 0], [30, 4], [60, 20], [80, 45]])
+    start = frenet_state(KinematicState(2.0, 0.3, 0.1, 9.0, a=0.5), path)
+    candidates = sample_candidates(start, path, SamplingConfig(), VEHICLE)
+    lon = candidates.lon
+    assert len(np.unique(lon[0], axis=0)) < lon.shape[1] / 5  # the grid shares its s(t)
+    expanded = cartesian_states(lon, np.arange(lon.shape[1]), candidates.lat, path)
+    for name, value in zip(("x", "y", "yaw", "v", "a", "kappa"), expanded, strict=True):
+        np.testing.assert_array_equal(getattr(candidates, name), value)
+    with pytest.raises(ValueError, match="lon_row"):
+        cartesian_states(lon, np.full(lon.shape[1], lon.shape[1]), candidates.lat, path)

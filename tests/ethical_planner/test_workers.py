@@ -5,7 +5,7 @@ import threading
 import numpy as np
 import pytest
 
-from ethical_planner.workers import Scratch, Workers, threads_from_environment
+from ethical_planner.workers import Workers, threads_from_environment
 
 
 def test_thread_count_comes_from_the_environment(monkeypatch):
@@ -44,20 +44,3 @@ def test_submit_runs_on_a_helper_or_says_run_it_yourself():
     future = workers.submit(threading.current_thread)
     assert future.result() is not threading.current_thread()
     workers.close()
-
-
-def test_scratch_is_reused_per_name_and_separate_per_thread():
-    scratch = Scratch()
-    a = scratch.get("a", (10, 3))
-    a[...] = 1.0
-    assert scratch.get("a", (10, 3)) is a
-    smaller = scratch.get("a", (4,))
-    assert np.shares_memory(a, smaller)  # one buffer per name
-    assert not np.shares_memory(a, scratch.get("b", (10, 3)))
-    bigger = scratch.get("a", (1000,))
-    assert bigger.shape == (1000,) and bigger.flags.c_contiguous
-    other = {}
-    thread = threading.Thread(target=lambda: other.setdefault("a", scratch.get("a", (10, 3))))
-    thread.start()
-    thread.join()
-    assert not np.shares_memory(other["a"], scratch.get("a", (10, 3)))
