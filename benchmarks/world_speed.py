@@ -37,8 +37,9 @@ class _CandidateCount(RunObserver):
     def __init__(self) -> None:
         self.counts: list[int] = []
 
-    def on_cycle(self, decision, time) -> None:  # noqa: ANN001 - the runner's hook
-        self.counts.append(len(decision.candidate_levels))
+    def on_cycle(self, plan, time) -> None:  # noqa: ANN001 - the runner's hook
+        if plan.decision is not None:
+            self.counts.append(len(plan.decision.candidate_levels))
 
 
 def closed_loop(duration: float, replan_rate: float) -> dict[str, float]:
@@ -48,6 +49,8 @@ def closed_loop(duration: float, replan_rate: float) -> dict[str, float]:
     summary = run_scenario(
         scenario, config, seed=0, config=RunConfig(replan_rate=replan_rate), observer=counter
     )
+    if summary.outcome == "failed":
+        raise RuntimeError(f"the closed loop failed at {summary.duration:.2f} s: {summary.reason}")
     t = summary.timings
     return {
         "label": f"closed loop, planner {replan_rate:g} Hz",
