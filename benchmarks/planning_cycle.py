@@ -1,8 +1,17 @@
-"""Planning-cycle benchmark: the full ethical cycle on the SPEC's standard grids.
+"""Planning-cycle benchmark: the full ethical cycle on the default candidate set and the SPEC's grids.
 
 Run as ``etp bench`` or ``python benchmarks/planning_cycle.py`` (same options). The scene is a straight
 three-lane road (ego in the middle lane at 10 m/s) with road users of mixed types
 spread 5-60 m ahead in the three lanes and a covariance growing over the horizon.
+
+Candidate sets ("grids"): ``default`` is the ethical preset's own set (15 x 15 end speeds
+x offsets for each of four horizons and the braking family; the continuation is off,
+since every cycle replans the same scene); ``225`` and ``2025`` are the paper's single
+grids. frenetix plans the grid part only: for ``default`` it plans each horizon's 225
+candidates in a cycle of its own and the times are added.
+
+``first_call_times`` measures the planner's first cycle in a new process, with the
+compiled kernels compiled afresh (an empty numba cache) and loaded from the disk cache.
 """
 
 from __future__ import annotations
@@ -22,6 +31,10 @@ from ethical_planner.road_users import DEFAULT_SHAPES, KinematicState, RoadUser,
 
 #: (n_speeds, n_offsets, horizon [s]) of the two standard grids.
 GRIDS = {"225": (15, 15, 2.0), "2025": (45, 45, 3.0)}
+#: The ethical preset's own candidate set (see ``grid_config``).
+DEFAULT_GRID = "default"
+#: Every candidate set ``grid_config`` knows, in the benchmark's order.
+GRID_NAMES = (DEFAULT_GRID, *GRIDS)
 LANE_WIDTH = 3.5
 EGO_SPEED = 10.0
 
@@ -82,15 +95,19 @@ def bench_scene(n_road_users: int, seed: int = 0) -> BenchScene:
 
 
 def grid_config(grid: str, base: PlannerConfig | None = None) -> PlannerConfig:
-    """The ethical preset with the sampling grid ``grid`` ('225' or '2025') and nothing else.
+    """The ethical preset with the candidate set ``grid`` ('default', '225' or '2025').
 
-    Only the paper's grid (one horizon, no braking family, no continuation), so that the
-    peer's cycle plans exactly the same candidates.
+    '225' and '2025' are the paper's grid only (one horizon, no braking family, no
+    continuation), so that the peer's cycle plans exactly the same candidates. 'default'
+    keeps the preset's candidates (several horizons, the braking family) without the
+    continuation (every cycle replans the same scene, so there is no previous plan).
     """
-    if grid not in GRIDS:
-        raise ValueError(f"unknown grid {grid!r}; allowed: {', '.join(GRIDS)}")
-    n_speeds, n_offsets, horizon = GRIDS[grid]
+    if grid not in GRID_NAMES:
+        raise ValueError(f"unknown grid {grid!r}; allowed: {', '.join(GRID_NAMES)}")
     base = base or preset("ethical")
+    if grid == DEFAULT_GRID:
+        return base.with_overrides({"commitment": {"enabled": False}})
+    n_speeds, n_offsets, horizon = GRIDS[grid]
     return base.with_overrides(
         {
             "sampling": {
@@ -133,6 +150,79 @@ def time_planner(
     return result
 
 
+#: Run in a new process by ``first_call_times``: the first and the second cycle, timed.
+_FIRST_CALL = """
+import json, sys, time
+clock = time.perf_counter()
+from benchmarks.planning_cycle import bench_scene, grid_config
+from ethical_planner.planner import Planner
+from ethical_planner.jit import cache_report
+imported = time.perf_counter() - clock
+grid, count = sys.argv[1], int(sys.argv[2])
+scene = bench_scene(count)
+planner = Planner(grid_config(grid), scene.environment)
+times = []
+for _ in range(2):
+    clock = time.perf_counter()
+    planner.plan(scene.ego, scene.road_users)
+    times.append(time.perf_counter() - clock)
+report = cache_report()
+print(json.dumps({
+    "import_s": imported, "first_cycle_s": times[0], "second_cycle_s": times[1],
+    "compiled": sum(r["compiled"] for r in report.values()),
+    "loaded": sum(r["loaded"] for r in report.values()),
+}))
+"""
+
+
+def first_call_times(grid: str = DEFAULT_GRID, n_road_users: int = 20) -> list[dict]:
+    """The first planning cycle of a new process: kernels compiled, then loaded from disk.
+
+    Two new processes share an empty numba cache folder: the first compiles every kernel
+    (and writes the cache), the second loads them. Each times the import of the planner,
+    its first and its second cycle.
+
+    Returns:
+        Two rows (``"cache": "empty"`` and ``"warm"``) with ``import_s``,
+        ``first_cycle_s``, ``second_cycle_s`` [s] and the kernel signatures
+        ``compiled`` and ``loaded``.
+    """
+    import json
+    import os
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    root = str(Path(__file__).resolve().parent.parent)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="etp-numba-") as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache, "PYTHONPATH": root}
+        for label in ("empty", "warm"):
+            command = [sys.executable, "-c", _FIRST_CALL, grid, str(n_road_users)]
+            done = subprocess.run(command, env=env, cwd=root, capture_output=True, text=True, check=True)
+            rows.append({"cache": label, "grid": grid, "road_users": n_road_users, **json.loads(done.stdout)})
+    return rows
+
+
+def format_first_call_table(rows: list[dict]) -> str:
+    """Plain-text table of ``first_call_times`` rows."""
+    lines = [
+        f"{'numba cache':>12} {'import':>8} {'1st cycle':>10} {'2nd cycle':>10} {'compiled':>9} {'loaded':>7}"
+    ]
+    for r in rows:
+        lines.append(
+            f"{r['cache']:>12} {r['import_s']:>6.2f} s {r['first_cycle_s']:>8.2f} s "
+            f"{r['second_cycle_s'] * 1e3:>7.1f} ms {r['compiled']:>9} {r['loaded']:>7}"
+        )
+    first = rows[0]
+    lines.append(
+        f"a new process, {first['grid']} candidates, {first['road_users']} road users: kernels compiled "
+        "on the first call (empty cache) or loaded from the disk cache (warm)"
+    )
+    return "\n".join(lines)
+
+
 def peer_obstacles(grid: str, n_road_users: int) -> list[dict]:
     """The same road users as predicted by our predictor, in the peer's format."""
     scene = bench_scene(n_road_users)
@@ -154,7 +244,11 @@ def peer_obstacles(grid: str, n_road_users: int) -> list[dict]:
 
 
 def time_peer(grid: str, n_road_users: int, repetitions: int = 20) -> dict | None:
-    """Time frenetix's C++ cycle on the same grid and road users; None if not installed."""
+    """Time frenetix's C++ cycle on the same grid and road users; None if not installed.
+
+    With several horizons (the 'default' set) frenetix plans each horizon's grid in a
+    cycle of its own; the medians and 90th percentiles are added.
+    """
     try:
         from benchmarks.peer_frenetix import time_frenetix_cycle
     except ImportError:
@@ -162,33 +256,39 @@ def time_peer(grid: str, n_road_users: int, repetitions: int = 20) -> dict | Non
     scene = bench_scene(n_road_users)
     config = grid_config(grid)
     sampling = config.sampling
-    horizon = max(sampling.horizons)
     v0 = scene.ego.v
     path = scene.environment.reference_path
-    try:
-        return time_frenetix_cycle(
-            np.column_stack([path.x, path.y])[::8],
-            {"x": scene.ego.x, "y": scene.ego.y, "yaw": scene.ego.yaw, "v": v0, "a": 0.0},
-            sampling.n_speeds,
-            sampling.n_offsets,
-            sampling.d_min,
-            sampling.d_max,
-            horizon,
-            sampling.dt,
-            peer_obstacles(grid, n_road_users) if n_road_users else [],
-            repetitions,
-            v_end_range=(
-                max(0.0, v0 - sampling.max_end_deceleration * horizon),
-                min(config.vehicle.v_max, v0 + sampling.max_end_acceleration * horizon),
-            ),
-        )
-    except ImportError:
-        return None
+    obstacles = peer_obstacles(grid, n_road_users) if n_road_users else []
+    total = {"median_ms": 0.0, "p90_ms": 0.0, "n_trajectories": 0}
+    for horizon in sampling.horizons:
+        try:
+            timing = time_frenetix_cycle(
+                np.column_stack([path.x, path.y])[::8],
+                {"x": scene.ego.x, "y": scene.ego.y, "yaw": scene.ego.yaw, "v": v0, "a": 0.0},
+                sampling.n_speeds,
+                sampling.n_offsets,
+                sampling.d_min,
+                sampling.d_max,
+                horizon,
+                sampling.dt,
+                obstacles,
+                repetitions,
+                v_end_range=(
+                    max(0.0, v0 - sampling.max_end_deceleration * horizon),
+                    min(config.vehicle.v_max, v0 + sampling.max_end_acceleration * horizon),
+                ),
+            )
+        except ImportError:
+            return None
+        total["median_ms"] += timing["median_ms"]
+        total["p90_ms"] += timing["p90_ms"]
+        total["n_trajectories"] += sampling.n_speeds * sampling.n_offsets
+    return total
 
 
 def run_benchmark(
     repetitions: int = 20,
-    grids: tuple[str, ...] = ("225", "2025"),
+    grids: tuple[str, ...] = GRID_NAMES,
     road_user_counts: tuple[int, ...] = (0, 5, 20),
     peer: bool = True,
 ) -> list[dict]:
@@ -209,6 +309,7 @@ def run_benchmark(
                 "planar_median_ms": round(planar["median_ms"], 2),
                 "planar_stages_ms": planar["stage_ms"],
                 "frenetix_median_ms": None if theirs is None else round(theirs["median_ms"], 2),
+                "frenetix_n_trajectories": None if theirs is None else theirs.get("n_trajectories"),
                 "speedup": None if theirs is None else round(theirs["median_ms"] / ours["median_ms"], 2),
             }
             rows.append(row)
@@ -300,6 +401,14 @@ def format_table(rows: list[dict]) -> str:
         "the same with [risk] delta_v_model = planar_impulse; frenetix = its C++ cycle with "
         "CalculateCollisionProbabilityFast (no harm, principles or R_max)"
     )
+    for r in rows:
+        peer_n = r.get("frenetix_n_trajectories")
+        if peer_n is not None and peer_n != r["n_trajectories"]:
+            lines.append(
+                f"{r['grid']}: frenetix plans its {peer_n} grid candidates (one cycle per horizon, "
+                f"times added), ours all {r['n_trajectories']} (grid and braking family)"
+            )
+            break
     return "\n".join(lines)
 
 

@@ -1,5 +1,7 @@
 import json
 
+import pytest
+
 from harm_calibration.cli import main
 
 
@@ -27,3 +29,39 @@ def test_bench_small_grid_writes_json(tmp_path, capsys):
     assert [r["road_users"] for r in rows] == [0, 5, 20]
     assert all(r["n_trajectories"] == 225 and r["ours_median_ms"] > 0 for r in rows)
     assert "frenetix" in capsys.readouterr().out
+
+
+def test_bench_lists_the_benchmarks_candidate_sets():
+    from benchmarks import planning_cycle
+    from harm_calibration.cli import bench
+
+    assert bench.GRID_NAMES == planning_cycle.GRID_NAMES
+
+
+def test_bench_default_set_is_the_presets_candidates_without_continuation():
+    from benchmarks.planning_cycle import grid_config
+    from ethical_planner.config import preset
+
+    config = grid_config("default")
+    assert config.sampling == preset("ethical").sampling and not config.commitment.enabled
+    assert grid_config("225").sampling.horizons == (2.0,) and not grid_config("225").sampling.brake_candidates
+
+
+def test_bench_peer_plans_every_horizon_of_the_default_set():
+    pytest.importorskip("frenetix")
+    from benchmarks.planning_cycle import grid_config, time_peer
+
+    sampling = grid_config("default").sampling
+    timing = time_peer("default", 0, repetitions=1)
+    assert timing["n_trajectories"] == len(sampling.horizons) * sampling.n_speeds * sampling.n_offsets
+
+
+@pytest.mark.slow
+def test_first_call_compiles_then_loads_every_kernel_from_the_disk_cache():
+    from benchmarks.planning_cycle import first_call_times
+
+    empty, warm = first_call_times("225", 5)
+    assert empty["compiled"] > 0 and empty["loaded"] == 0
+    # The warm process loads the kernels the cycle calls from Python; the kernels they call
+    # are inside that machine code (compiled, in the first process, as part of their callers).
+    assert warm["compiled"] == 0 and 0 < warm["loaded"] <= empty["compiled"]
