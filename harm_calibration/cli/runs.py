@@ -46,20 +46,24 @@ def _near_crash(args: argparse.Namespace) -> int:
         return 0
     run_width = max(len("run id"), *(len(r.run_id) for r in found))
     header = (
-        f"{'severity':>8}  {'run id':<{run_width}}  {'planner':<9} {'seed':>5} {'outcome':<8} {'coll':>4} "
-        f"{'harm meas':>9} {'harm pred':>9} {'min d':>6} {'ttc':>6} {'p max':>6}  recording"
+        f"{'severity':>8}  {'run id':<{run_width}}  {'planner':<9} {'seed':>5} {'outcome':<8} {'ego':>3} "
+        f"{'3rd':>3} {'harm meas':>9} {'harm pred':>9} {'min d':>6} {'VRU d':>6} {'ttc':>6} {'p max':>6}  "
+        "recording"
     )
     print(header)
     for r in found:
         print(
             f"{r.severity:8.3f}  {r.run_id:<{run_width}}  {r.planner:<9} {r.seed:>5} {r.outcome:<8} "
-            f"{r.collisions:>4} {_fmt(r.max_harm_measured):>9} {_fmt(r.max_harm_predicted):>9} "
-            f"{_fmt(r.min_distance, 2):>6} {_fmt(r.min_ttc, 2):>6} "
+            f"{r.ego_collisions:>3} {r.third_party_collisions:>3} "
+            f"{_fmt(r.max_harm_measured):>9} {_fmt(r.max_harm_predicted):>9} "
+            f"{_fmt(r.min_distance, 2):>6} {_fmt(r.min_distance_vulnerable, 2):>6} {_fmt(r.min_ttc, 2):>6} "
             f"{_fmt(r.max_collision_probability):>6}  {r.recording or '-'}"
         )
     print(HARM_LEGEND)
-    print("min d: smallest ego distance [m]; ttc: smallest time-to-collision [s]; p max: highest planned")
-    print(f"collision probability. Open a run: etp replay RUN_ID --root {args.dir}")
+    print("ego / 3rd: collisions the ego took part in (a crash) / between other road users (ranked after")
+    print("crashes). min d / VRU d: smallest ego distance to any / a vulnerable road user [m]; ttc: smallest")
+    print("time-to-collision [s]; p max: highest planned collision probability.")
+    print(f"Open a run: etp replay RUN_ID --root {args.dir}")
     return 0
 
 
@@ -92,9 +96,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "near-crash",
         help="list the near-crash runs of an output root, worst first",
         description="Read DIR/index.jsonl and list runs with a collision or past the "
-        "near-crash thresholds (min distance < 0.5 m, time-to-collision < 1 s, planned collision "
-        "probability >= 0.1), worst first: collisions by 1 + highest harm, then near misses "
-        "(see mujoco_world.storage.run_index). The run ids printed are the ones etp replay takes.",
+        "near-crash thresholds (min distance < 0.5 m, distance to a vulnerable road user < 1 m, "
+        "time-to-collision < 1 s, planned collision probability >= 0.1), worst first: ego-involved "
+        "collisions (crashes) by 2 + highest harm, third-party collisions by 1 + highest harm, then "
+        "near misses (see mujoco_world.storage.run_index). The run ids printed are the ones etp "
+        "replay takes.",
     )
     p.add_argument("dir", metavar="DIR", help="output root holding index.jsonl")
     p.add_argument("--top", type=int, default=None, metavar="N", help="show the N worst")

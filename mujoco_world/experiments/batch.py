@@ -30,6 +30,7 @@ from mujoco_world.loop.summary import GROUPS, OUTCOMES, RunSummary
 from mujoco_world.scenario.sources import resolve_scenario
 from mujoco_world.storage.recording import RerunRecorder
 from mujoco_world.storage.run_folder import parse_keep, run_dir, run_id, source_key, source_of, store_run
+from mujoco_world.storage.run_index import NearCrashThresholds
 from mujoco_world.storage.run_record import RECORD_FILE, RunRecord, read_record, write_json
 
 #: Planner presets of the paper's comparison.
@@ -266,8 +267,22 @@ def _fmt(value: Any, digits: int = 4) -> str:
     return f"{value:.{digits}f}"
 
 
+#: Clearance to a vulnerable road user below which a goal is not a clean one [m]
+#: (``run_index.NearCrashThresholds.vulnerable_clearance``).
+VULNERABLE_CLEARANCE = NearCrashThresholds().vulnerable_clearance
+
+
+def _finite_or_none(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
 def aggregate_row(record: RunRecord) -> dict[str, Any]:
-    """The compact JSON row of a run in ``aggregate.json``."""
+    """The compact JSON row of a run in ``aggregate.json``.
+
+    ``collisions`` counts all of them; ``ego_collisions`` those the ego took part in
+    (a crash), ``third_party_collisions`` those between others. ``harm`` sums over all
+    collisions, ``harm_ego_involved`` and ``harm_third_party`` split it.
+    """
     s = record.summary
     return {
         "run_id": record.run_id,
@@ -278,44 +293,84 @@ def aggregate_row(record: RunRecord) -> dict[str, Any]:
         "reason": s.reason,
         "duration": s.duration,
         "collisions": len(s.collisions),
+        "ego_collisions": len(s.ego_collisions),
+        "third_party_collisions": len(s.third_party_collisions),
         "ego_collided": s.ego_collided,
         "max_risk": dict(s.max_risk),
         "harm": dict(s.harm),
-        "min_distance": s.min_distance if math.isfinite(s.min_distance) else None,
+        "harm_ego_involved": dict(s.harm_ego_involved),
+        "harm_third_party": dict(s.harm_third_party),
+        "min_distance": _finite_or_none(s.min_distance),
+        "min_distance_vulnerable": _finite_or_none(s.min_distance_vulnerable),
+        "clearance_vulnerable": dict(s.clearance_vulnerable),
         "wall_time": s.timings.get("total"),
     }
 
 
+def _outcome_label(s: RunSummary) -> str:
+    """The outcome, with ``goal~`` for a goal that passed a vulnerable road user too closely."""
+    close = math.isfinite(s.min_distance_vulnerable) and s.min_distance_vulnerable < VULNERABLE_CLEARANCE
+    return "goal~" if s.outcome == "goal" and close else s.outcome
+
+
+def _table_line(s: RunSummary) -> str:
+    risk, harm = s.max_risk, s.harm_ego_involved
+    third_harm = sum(v for v in s.harm_third_party.values() if math.isfinite(v))
+    return (
+        f"{s.scenario:<30} {s.planner:<9} {s.seed!s:>4} {_outcome_label(s):<8} "
+        f"{_fmt(s.duration, 1):>6} {len(s.ego_collisions):>3} {len(s.third_party_collisions):>3} "
+        f"{_fmt(risk.get('ego')):>8} {_fmt(risk.get('third_party')):>7} "
+        f"{_fmt(risk.get('vulnerable')):>7} "
+        f"{_fmt(harm.get('ego'), 3):>7} {_fmt(harm.get('third_party'), 3):>6} "
+        f"{_fmt(harm.get('vulnerable'), 3):>6} {_fmt(third_harm, 3):>7} "
+        f"{_fmt(s.min_distance, 2):>6} {_fmt(s.min_distance_vulnerable, 2):>6}"
+    )
+
+
+def _planner_totals(planner: str, mine: Sequence[RunSummary]) -> str:
+    counts = {o: sum(1 for s in mine if s.outcome == o) for o in OUTCOMES}
+    close = sum(1 for s in mine if _outcome_label(s) == "goal~")
+    mean_risk = {g: sum(s.max_risk.get(g, 0.0) for s in mine) / max(len(mine), 1) for g in GROUPS}
+    harm = {g: sum(s.harm_ego_involved.get(g, 0.0) for s in mine) for g in GROUPS}
+    third = sum(len(s.third_party_collisions) for s in mine)
+    third_harm = sum(sum(s.harm_third_party.values()) for s in mine)
+    return (
+        f"  {planner:<9} {len(mine):>3} runs  "
+        + " ".join(f"{k} {v}" for k, v in counts.items())
+        + f" (goal~ {close})  3rd-party collisions {third}"
+        + "  | max risk ego {ego:.4f} 3rd {third_party:.4f} VRU {vulnerable:.4f}".format(**mean_risk)
+        + "  | ego-involved harm ego {ego:.3f} 3rd {third_party:.3f} VRU {vulnerable:.3f}".format(**harm)
+        + f"  | 3rd-party harm {third_harm:.3f}"
+    )
+
+
 def comparison_table(records: Iterable[RunRecord]) -> str:
-    """Plain-text table: one line per run, then per-planner totals (paper Figs. 5, 6)."""
+    """Plain-text table: one line per run, then per-planner totals (paper Figs. 5, 6).
+
+    A crash is an ego-involved collision; collisions between other road users are
+    counted and their harm summed apart ("3rd" columns).
+    """
     runs = sorted((r.summary for r in records), key=lambda s: (s.scenario, s.planner, s.seed))
     head = (
-        f"{'scenario':<30} {'planner':<9} {'seed':>4} {'outcome':<8} {'t [s]':>6} {'coll':>4} "
-        f"{'max risk ego':>12} {'3rd':>7} {'VRU':>7} {'harm ego':>9} {'3rd':>6} {'VRU':>6} {'min d':>6}"
+        f"{'scenario':<30} {'planner':<9} {'seed':>4} {'outcome':<8} {'t [s]':>6} {'ego':>3} {'3rd':>3} "
+        f"{'risk ego':>8} {'3rd':>7} {'VRU':>7} {'harm ego':>7} {'3rd':>6} {'VRU':>6} {'3rd-pty':>7} "
+        f"{'min d':>6} {'VRU d':>6}"
     )
     lines = [head, "-" * len(head)]
-    for s in runs:
-        risk, harm = s.max_risk, s.harm
-        lines.append(
-            f"{s.scenario:<30} {s.planner:<9} {s.seed!s:>4} {s.outcome:<8} "
-            f"{_fmt(s.duration, 1):>6} {len(s.collisions):>4} "
-            f"{_fmt(risk.get('ego')):>12} {_fmt(risk.get('third_party')):>7} "
-            f"{_fmt(risk.get('vulnerable')):>7} "
-            f"{_fmt(harm.get('ego'), 3):>9} {_fmt(harm.get('third_party'), 3):>6} "
-            f"{_fmt(harm.get('vulnerable'), 3):>6} {_fmt(s.min_distance, 2):>6}"
-        )
-    lines += ["", "per planner: runs, outcomes, mean of max risk per group, summed measured harm per group"]
+    lines += [_table_line(s) for s in runs]
+    lines += [
+        "",
+        "ego / 3rd: ego-involved / third-party collisions; risk: highest risk per group along the "
+        "executed plans;",
+        "harm ego 3rd VRU: measured harm per group in the ego's collisions; 3rd-pty: measured harm in "
+        "third-party collisions;",
+        f"min d / VRU d: smallest ego distance to any road user / a vulnerable one [m]; goal~: a goal "
+        f"passing a vulnerable road user closer than {VULNERABLE_CLEARANCE} m",
+        "",
+        "per planner: runs, outcomes, mean of max risk per group, summed measured harm per group",
+    ]
     for planner in sorted({s.planner for s in runs}):
-        mine = [s for s in runs if s.planner == planner]
-        counts = {o: sum(1 for s in mine if s.outcome == o) for o in OUTCOMES}
-        mean_risk = {g: sum(s.max_risk.get(g, 0.0) for s in mine) / max(len(mine), 1) for g in GROUPS}
-        harm = {g: sum(s.harm.get(g, 0.0) for s in mine) for g in GROUPS}
-        lines.append(
-            f"  {planner:<9} {len(mine):>3} runs  "
-            + " ".join(f"{k} {v}" for k, v in counts.items())
-            + "  | max risk ego {ego:.4f} 3rd {third_party:.4f} VRU {vulnerable:.4f}".format(**mean_risk)
-            + "  | harm ego {ego:.3f} 3rd {third_party:.3f} VRU {vulnerable:.3f}".format(**harm)
-        )
+        lines.append(_planner_totals(planner, [s for s in runs if s.planner == planner]))
     return "\n".join(lines)
 
 

@@ -31,6 +31,8 @@ from mujoco_world.loop.summary import GROUPS
 
 #: Number of highest risk values kept per group (paper Fig. 5 uses 100).
 TOP_RISKS = 100
+#: Distances beyond this are not resolved (``MinDistance``) [m].
+DISTANCE_CAP = 50.0
 
 
 @runtime_checkable
@@ -142,7 +144,9 @@ class MinDistance(Metric):
     """Smallest ego-to-road-user geom distance until the ego's first contact.
 
     Values: ``min_distance`` and ``min_distance_vulnerable`` [m] (negative: overlap;
-    nan if there was none to measure).
+    nan if there was none to measure), and ``clearance_vulnerable``: the smallest
+    distance to each vulnerable road user by name [m] (distances are capped at
+    ``DISTANCE_CAP``: 50.0 means "never closer than 50 m").
 
     Args:
         interval: physics steps between measurements.
@@ -154,26 +158,31 @@ class MinDistance(Metric):
     def start(self, run: RunState) -> None:
         """Which road users are vulnerable."""
         self.vulnerable = np.array([t in VULNERABLE_TYPES for t in run.world.types[1:]])
+        self.names = tuple(run.world.scene.names[1:])
         self.closest = math.inf
-        self.closest_vulnerable = math.inf
+        self.per_user = np.full(len(self.names), math.inf)
 
     def sample(self, run: RunState) -> None:
         """``mj_geomDistance`` from the ego to every road user."""
         world = run.world
         if world.n < 2 or world.crashed[0]:
             return
-        dist = world.ego_distances()
+        dist = world.ego_distances(DISTANCE_CAP)
         self.closest = min(self.closest, float(dist.min()))
-        if self.vulnerable.any():
-            self.closest_vulnerable = min(self.closest_vulnerable, float(dist[self.vulnerable].min()))
+        np.minimum(self.per_user, dist, out=self.per_user)
 
     def values(self, run: RunState) -> dict[str, Any]:
-        """``min_distance`` and ``min_distance_vulnerable``."""
+        """``min_distance``, ``min_distance_vulnerable`` and ``clearance_vulnerable``."""
+        vulnerable = self.per_user[self.vulnerable]
+        closest_vulnerable = float(vulnerable.min()) if vulnerable.size else math.inf
         return {
             "min_distance": self.closest if math.isfinite(self.closest) else math.nan,
-            "min_distance_vulnerable": (
-                self.closest_vulnerable if math.isfinite(self.closest_vulnerable) else math.nan
-            ),
+            "min_distance_vulnerable": closest_vulnerable if math.isfinite(closest_vulnerable) else math.nan,
+            "clearance_vulnerable": {
+                name: float(d)
+                for name, d, vru in zip(self.names, self.per_user, self.vulnerable, strict=True)
+                if vru and math.isfinite(d)
+            },
         }
 
 
@@ -220,24 +229,34 @@ class TimeToCollision(Metric):
 
 
 class HarmPerGroup(Metric):
-    """Measured harm summed per group (ego, third_party, vulnerable) over all collisions.
+    """Measured harm summed per group (ego, third_party, vulnerable) over the collisions.
 
-    Value: ``harm``. Walls have no harm (nan) and are left out.
+    Values: ``harm`` (all collisions), ``harm_ego_involved`` (collisions the ego took
+    part in: what the ego's planner answers for) and ``harm_third_party`` (collisions
+    between other road users). Walls have no harm (nan) and are left out.
     """
 
     def start(self, run: RunState) -> None:
         """No harm yet."""
         self.harm = {g: 0.0 for g in GROUPS}
+        self.ego_involved = {g: 0.0 for g in GROUPS}
+        self.third_party = {g: 0.0 for g in GROUPS}
 
     def on_impact(self, run: RunState, record: ImpactRecord) -> None:
         """Add both bodies' measured harm to their groups."""
+        split = self.ego_involved if record.involves_ego else self.third_party
         for body in (record.a, record.b):
             if body.group in self.harm and math.isfinite(body.harm_measured):
                 self.harm[body.group] += body.harm_measured
+                split[body.group] += body.harm_measured
 
     def values(self, run: RunState) -> dict[str, Any]:
-        """``harm``."""
-        return {"harm": dict(self.harm)}
+        """``harm``, ``harm_ego_involved`` and ``harm_third_party``."""
+        return {
+            "harm": dict(self.harm),
+            "harm_ego_involved": dict(self.ego_involved),
+            "harm_third_party": dict(self.third_party),
+        }
 
 
 class TrackingError(Metric):

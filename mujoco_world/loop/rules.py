@@ -16,8 +16,12 @@ always appended last by the runner, so every run ends. A new rule is a new objec
 with ``interval``, ``start`` and ``check`` (see ``StopRule``), passed with the
 defaults: ``run_scenario(..., rules=(*default_rules(config), MyRule()))``.
 
-Which contacts make a crash is one object too (``CrashCriterion``): ``AnyContact``
-(any two bodies touching, the default) or ``EgoContact`` (only contacts of the ego).
+Which contacts make a crash is one object too (``CrashCriterion``): ``EgoContact``
+(only contacts of the ego, the default: a "crash" is an ego-involved collision) or
+``AnyContact`` (any two bodies touching). Under ``EgoContact`` a collision between two
+other road users (third party) is measured and reported (``RunSummary.
+third_party_collisions``, ``harm_third_party``) but does not end the run: the ego
+still has to reach its goal.
 """
 
 from __future__ import annotations
@@ -86,7 +90,7 @@ class CrashCriterion(Protocol):
 
 
 class AnyContact(CrashCriterion):
-    """Any two bodies touching (or a body and a wall) make a crash."""
+    """Any two bodies touching (or a body and a wall) make a crash (not the default)."""
 
     def touched(self, world: World) -> bool:
         """Any body has touched something."""
@@ -98,7 +102,7 @@ class AnyContact(CrashCriterion):
 
 
 class EgoContact(CrashCriterion):
-    """Only contacts of the ego make a crash; others' collisions are still measured."""
+    """Only contacts of the ego make a crash (the default); others' collisions are still measured."""
 
     def touched(self, world: World) -> bool:
         """The ego (entity 0) has touched something."""

@@ -34,8 +34,8 @@ from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.metrics import Metric, default_metrics
 from mujoco_world.loop.observers import ObserverGroup, RunObserver
 from mujoco_world.loop.rules import (
-    AnyContact,
     CrashCriterion,
+    EgoContact,
     Stop,
     StopRule,
     TimeLimit,
@@ -331,7 +331,8 @@ def run_scenario(
         rules: stop rules in the order they are checked (default
             ``rules.default_rules(config)``); ``TimeLimit`` is always added last.
         metrics: what the summary reports (default ``metrics.default_metrics(config)``).
-        crash: which contacts make a crash (default ``rules.AnyContact()``).
+        crash: which contacts make a crash (default ``rules.EgoContact()``: only
+            ego-involved collisions; third-party ones are measured, the run goes on).
 
     Returns:
         The run summary; never raises for planner errors or diverging physics
@@ -350,7 +351,7 @@ def run_scenario(
         observer or RunObserver(),
         default_rules(config) if rules is None else rules,
         default_metrics(config) if metrics is None else metrics,
-        crash or AnyContact(),
+        crash or EgoContact(),
         predictor,
     )
     return loop.execute()

@@ -71,13 +71,19 @@ class RunSummary:
         outcome: goal, timeout, crash or failed. reason: why the run ended.
         duration: simulated time [s]. steps: physics steps. cycles: planning cycles.
         bodies: every simulated body (id = entity index, shape, mass), ego first.
-        collisions: every measured collision with the model's prediction beside it.
-        ego_collided: the ego took part in a collision.
+        collisions: every measured collision with the model's prediction beside it,
+            ego-involved and third-party (``ego_collisions``, ``third_party_collisions``).
+        ego_collided: the ego took part in a collision (the run is then a ``crash``
+            under the default crash criterion ``rules.EgoContact``).
         max_risk: highest risk per group (ego, third_party, vulnerable) along the
             executed plans. top_risks: up to 100 highest risk values per group.
         harm: summed measured harm per group over all collisions.
+        harm_ego_involved: the same over the collisions the ego took part in.
+        harm_third_party: the same over collisions between other road users.
         min_distance: smallest ego-to-road-user distance [m] (negative: overlap).
         min_distance_vulnerable: the same to vulnerable road users [m].
+        clearance_vulnerable: smallest ego distance to each vulnerable road user by
+            name [m], until the ego's first contact (capped at 50 m).
         min_ttc: smallest constant-velocity time-to-collision of the ego [s] (inf:
             no approach within the horizon).
         max_collision_probability: highest collision probability of any road user
@@ -105,8 +111,11 @@ class RunSummary:
     max_risk: dict[str, float] = field(default_factory=dict)
     top_risks: dict[str, tuple[float, ...]] = field(default_factory=dict)
     harm: dict[str, float] = field(default_factory=dict)
+    harm_ego_involved: dict[str, float] = field(default_factory=dict)
+    harm_third_party: dict[str, float] = field(default_factory=dict)
     min_distance: float = math.nan
     min_distance_vulnerable: float = math.nan
+    clearance_vulnerable: dict[str, float] = field(default_factory=dict)
     min_ttc: float = math.nan
     max_collision_probability: float = math.nan
     tracking_rms: float = math.nan
@@ -115,6 +124,16 @@ class RunSummary:
     levels: dict[str, int] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     extra_metrics: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ego_collisions(self) -> tuple[ImpactRecord, ...]:
+        """The collisions the ego took part in."""
+        return tuple(c for c in self.collisions if c.involves_ego)
+
+    @property
+    def third_party_collisions(self) -> tuple[ImpactRecord, ...]:
+        """The collisions between other road users (or a road user and a wall)."""
+        return tuple(c for c in self.collisions if not c.involves_ego)
 
     def body(self, entity: int) -> BodyRecord:
         """The body with entity index ``entity``.

@@ -20,15 +20,25 @@ metrics``):
 * ``max_collision_probability``: the highest ``collision_probability`` of any road
   user along the chosen plans (``Decision.road_users``).
 * ``max_risk``: highest risk per group (ego, third_party, vulnerable).
+* ``min_distance_vulnerable``: smallest ego distance to a vulnerable road user [m]
+  (the smallest of the run's ``clearance_vulnerable``).
 
-Near crash: a collision, or ``min_distance < thresholds.min_distance``, or
-``min_ttc < thresholds.min_ttc``, or ``max_collision_probability >=
-thresholds.collision_probability``. Severity score (higher is worse):
+Collisions are counted apart: ``ego_collisions`` (the ego took part: a crash) and
+``third_party_collisions`` (between other road users: measured, not the ego's crash).
 
-* with a collision: ``1 + max harm`` over all bodies of all collisions, measured or
-  predicted (so in [1, 2]: every collision ranks above every near miss);
-* otherwise ``max(s_d, s_ttc, s_p)`` in [0, 1): ``s_d = 1 - min_distance /
-  thresholds.min_distance``, ``s_ttc = 1 - min_ttc / thresholds.min_ttc``,
+Near crash: a collision (ego-involved or third-party), or ``min_distance <
+thresholds.min_distance``, or ``min_distance_vulnerable <
+thresholds.vulnerable_clearance`` (a pass at 0.06 m from a cyclist is a near crash,
+not a clean goal), or ``min_ttc < thresholds.min_ttc``, or
+``max_collision_probability >= thresholds.collision_probability``. Severity score
+(higher is worse):
+
+* with an ego-involved collision: ``2 + max harm`` over all bodies of the ego's
+  collisions, measured or predicted (in [2, 3]: every crash ranks first);
+* with third-party collisions only: ``1 + max harm`` over theirs (in [1, 2]);
+* otherwise ``max(s_d, s_v, s_ttc, s_p)`` in [0, 1): ``s_d = 1 - min_distance /
+  thresholds.min_distance``, ``s_v = 1 - min_distance_vulnerable /
+  thresholds.vulnerable_clearance``, ``s_ttc = 1 - min_ttc / thresholds.min_ttc``,
   ``s_p = (p - p_thr) / (1 - p_thr)``, each clipped to [0, 0.999].
 """
 
@@ -44,6 +54,7 @@ from pathlib import Path
 from typing import Any
 
 from ethical_planner.validation import check, check_positive
+from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.loop.summary import GROUPS
 from mujoco_world.storage.run_record import RunRecord
 
@@ -59,11 +70,14 @@ class NearCrashThresholds:
         min_distance: ego-to-road-user distance below which [m].
         min_ttc: time-to-collision below which [s].
         collision_probability: highest planned collision probability at or above which, in (0, 1].
+        vulnerable_clearance: ego-to-vulnerable-road-user distance below which [m]
+            (1.0 m: the clearance a cyclist or pedestrian is owed when passed).
     """
 
     min_distance: float = 0.5
     min_ttc: float = 1.0
     collision_probability: float = 0.1
+    vulnerable_clearance: float = 1.0
 
     def __post_init__(self) -> None:
         check_positive(
@@ -71,6 +85,7 @@ class NearCrashThresholds:
             min_distance=self.min_distance,
             min_ttc=self.min_ttc,
             collision_probability=self.collision_probability,
+            vulnerable_clearance=self.vulnerable_clearance,
         )
         check(
             self.collision_probability <= 1.0,
@@ -84,11 +99,17 @@ class IndexRow:
 
     Attributes:
         run_id: unique id (the run folder's name). scenario, planner, seed: what ran.
-        outcome: goal, timeout, crash or failed.
+        outcome: goal, timeout, crash (an ego-involved collision) or failed.
         collisions: number of measured collisions.
         max_harm_measured, max_harm_predicted: highest harm of any body in any collision
             (0 without collisions).
         min_distance: [m] (nan if there was no road user).
+        ego_collisions: collisions the ego took part in.
+        third_party_collisions: collisions between other road users.
+        max_harm_ego_involved: highest harm (measured or predicted) of any body in
+            the ego's collisions (0 without).
+        min_distance_vulnerable: smallest ego distance to a vulnerable road user [m]
+            (nan without one).
         min_ttc: [s] (inf if no approach within the horizon, nan if unknown).
         max_collision_probability: highest planned collision probability (nan if unknown).
         max_risk: highest risk per group (ego, third_party, vulnerable).
@@ -114,6 +135,10 @@ class IndexRow:
     severity: float = 0.0
     recording: str | None = None
     duration: float = 0.0
+    ego_collisions: int = 0
+    third_party_collisions: int = 0
+    max_harm_ego_involved: float = 0.0
+    min_distance_vulnerable: float = math.nan
 
     def to_json(self) -> str:
         """One JSON line (non-finite floats as strings "inf"/"nan" so they survive JSON)."""
@@ -171,6 +196,10 @@ _FIELD_KINDS: dict[str, tuple[type, ...]] = {
     "severity": (int, float),
     "recording": (str, type(None)),
     "duration": (int, float),
+    "ego_collisions": (int,),
+    "third_party_collisions": (int,),
+    "max_harm_ego_involved": (int, float),
+    "min_distance_vulnerable": (int, float),
 }
 
 
@@ -191,44 +220,51 @@ def _decode(value: Any) -> Any:
 
 
 def severity(
-    row_collisions: int,
+    ego_collisions: int,
     max_harm: float,
     min_distance: float,
     min_ttc: float,
     max_collision_probability: float,
     thresholds: NearCrashThresholds,
+    *,
+    third_party_collisions: int = 0,
+    min_distance_vulnerable: float = math.nan,
 ) -> tuple[bool, float]:
     """Near-crash flag and severity score of a run (see the module docstring).
 
     Args:
-        row_collisions: number of collisions.
-        max_harm: highest harm (measured or predicted) of any collision, in [0, 1].
+        ego_collisions: number of collisions the ego took part in.
+        max_harm: highest harm (measured or predicted) in [0, 1] of any body of the
+            ego's collisions if there are any, else of the third-party collisions.
         min_distance: smallest ego distance [m].
         min_ttc: smallest time-to-collision [s].
         max_collision_probability: highest planned collision probability in [0, 1]
             (nan values count as "not past the threshold").
         thresholds: what counts as a near crash.
+        third_party_collisions: number of collisions between other road users.
+        min_distance_vulnerable: smallest ego distance to a vulnerable road user [m].
 
     Returns:
         (near_crash, score).
     """
-    if row_collisions > 0:
-        return True, 1.0 + (max_harm if math.isfinite(max_harm) else 0.0)
+    harm = max_harm if math.isfinite(max_harm) else 0.0
+    if ego_collisions > 0:
+        return True, 2.0 + harm
+    if third_party_collisions > 0:
+        return True, 1.0 + harm
 
-    def clip(x: float) -> float:
-        return min(max(x, 0.0), 0.999) if math.isfinite(x) else 0.0
+    def below(value: float, threshold: float) -> tuple[bool, float]:
+        if not math.isfinite(value):
+            return False, 0.0
+        return value < threshold, min(max(1.0 - value / threshold, 0.0), 0.999)
 
-    p_thr = thresholds.collision_probability
-    s_d = clip(1.0 - min_distance / thresholds.min_distance) if math.isfinite(min_distance) else 0.0
-    s_t = clip(1.0 - min_ttc / thresholds.min_ttc) if math.isfinite(min_ttc) else 0.0
-    p = max_collision_probability
-    s_p = clip((p - p_thr) / (1.0 - p_thr)) if p_thr < 1.0 and math.isfinite(p) else 0.0
-    near = (
-        (math.isfinite(min_distance) and min_distance < thresholds.min_distance)
-        or (math.isfinite(min_ttc) and min_ttc < thresholds.min_ttc)
-        or (math.isfinite(p) and p >= p_thr)
-    )
-    return bool(near), max(s_d, s_t, s_p)
+    near_d, s_d = below(min_distance, thresholds.min_distance)
+    near_v, s_v = below(min_distance_vulnerable, thresholds.vulnerable_clearance)
+    near_t, s_t = below(min_ttc, thresholds.min_ttc)
+    p, p_thr = max_collision_probability, thresholds.collision_probability
+    near_p = math.isfinite(p) and p >= p_thr
+    s_p = min(max((p - p_thr) / (1.0 - p_thr), 0.0), 0.999) if p_thr < 1.0 and math.isfinite(p) else 0.0
+    return bool(near_d or near_v or near_t or near_p), max(s_d, s_v, s_t, s_p)
 
 
 def make_row(record: RunRecord, thresholds: NearCrashThresholds | None = None) -> IndexRow:
@@ -247,15 +283,21 @@ def make_row(record: RunRecord, thresholds: NearCrashThresholds | None = None) -
         finite = [v for v in values if math.isfinite(v)]
         return max(finite) if finite else 0.0
 
+    def harm_of(collisions: Iterable[ImpactRecord]) -> float:
+        return max_of(h for c in collisions for b in (c.a, c.b) for h in (b.harm_measured, b.harm_predicted))
+
     harm_m = max_of(b.harm_measured for c in summary.collisions for b in (c.a, c.b))
     harm_p = max_of(b.harm_predicted for c in summary.collisions for b in (c.a, c.b))
+    ego, third = summary.ego_collisions, summary.third_party_collisions
     near, score = severity(
-        len(summary.collisions),
-        max(harm_m, harm_p),
+        len(ego),
+        harm_of(ego) if ego else harm_of(third),
         summary.min_distance,
         summary.min_ttc,
         summary.max_collision_probability,
         thresholds,
+        third_party_collisions=len(third),
+        min_distance_vulnerable=summary.min_distance_vulnerable,
     )
     return IndexRow(
         run_id=record.run_id,
@@ -274,6 +316,10 @@ def make_row(record: RunRecord, thresholds: NearCrashThresholds | None = None) -
         severity=float(score),
         recording=record.recording,
         duration=float(summary.duration),
+        ego_collisions=len(ego),
+        third_party_collisions=len(third),
+        max_harm_ego_involved=harm_of(ego),
+        min_distance_vulnerable=float(summary.min_distance_vulnerable),
     )
 
 

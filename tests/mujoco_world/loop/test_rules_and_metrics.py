@@ -208,8 +208,8 @@ def test_harm_per_group_sums_measured_harm_and_skips_walls():
     metric = HarmPerGroup()
     metric.start(None)
 
-    def record(a, b):
-        return SimpleNamespace(a=SimpleNamespace(**a), b=SimpleNamespace(**b))
+    def record(a, b, ego=True):
+        return SimpleNamespace(a=SimpleNamespace(**a), b=SimpleNamespace(**b), involves_ego=ego)
 
     metric.on_impact(
         None, record({"group": "ego", "harm_measured": 0.2}, {"group": "vulnerable", "harm_measured": 0.5})
@@ -217,15 +217,27 @@ def test_harm_per_group_sums_measured_harm_and_skips_walls():
     metric.on_impact(
         None, record({"group": "ego", "harm_measured": 0.1}, {"group": "static", "harm_measured": math.nan})
     )
-    assert metric.values(None)["harm"] == pytest.approx({"ego": 0.3, "third_party": 0.0, "vulnerable": 0.5})
+    # a taxi hits a cyclist: third party, not the ego's
+    metric.on_impact(
+        None,
+        record(
+            {"group": "third_party", "harm_measured": 0.05},
+            {"group": "vulnerable", "harm_measured": 0.25},
+            ego=False,
+        ),
+    )
+    values = metric.values(None)
+    assert values["harm"] == pytest.approx({"ego": 0.3, "third_party": 0.05, "vulnerable": 0.75})
+    assert values["harm_ego_involved"] == pytest.approx({"ego": 0.3, "third_party": 0.0, "vulnerable": 0.5})
+    assert values["harm_third_party"] == pytest.approx({"ego": 0.0, "third_party": 0.05, "vulnerable": 0.25})
 
 
 def test_min_distance_stops_at_the_ego_contact():
-    world = SimpleNamespace(
-        n=3, types=("car", RoadUserType.CAR, RoadUserType.PEDESTRIAN), crashed=np.zeros(3, bool)
-    )
-    distances = iter([np.array([4.0, 6.0]), np.array([3.0, 2.5]), np.array([-0.2, 0.1])])
-    world.ego_distances = lambda: next(distances)
+    types = ("car", RoadUserType.CAR, RoadUserType.PEDESTRIAN, RoadUserType.BICYCLE)
+    world = SimpleNamespace(n=4, types=types, crashed=np.zeros(4, bool))
+    world.scene = SimpleNamespace(names=("ego", "van", "walker", "cyclist"))
+    distances = iter([np.array([4.0, 6.0, 0.9]), np.array([3.0, 2.5, 50.0]), np.array([-0.2, 0.1, 0.0])])
+    world.ego_distances = lambda cap: next(distances)
     run = SimpleNamespace(world=world)
     metric = MinDistance(interval=10)
     metric.start(run)
@@ -233,7 +245,11 @@ def test_min_distance_stops_at_the_ego_contact():
     metric.sample(run)
     world.crashed[0] = True
     metric.sample(run)  # after the ego's contact: not measured
-    assert metric.values(run) == {"min_distance": 2.5, "min_distance_vulnerable": 2.5}
+    assert metric.values(run) == {
+        "min_distance": 0.9,
+        "min_distance_vulnerable": 0.9,
+        "clearance_vulnerable": {"walker": 2.5, "cyclist": 0.9},  # each VRU's own closest pass
+    }
 
 
 def test_validity_levels_count_cycles():
@@ -293,12 +309,21 @@ def test_a_new_rule_and_a_new_metric_plug_in_without_touching_the_loop():
 
 
 def test_crash_means_what_the_criterion_says():
-    any_contact = run_scenario(head_on_beside_the_ego(), "standard")
+    any_contact = run_scenario(head_on_beside_the_ego(), "standard", crash=AnyContact())
     assert any_contact.outcome == "crash" and len(any_contact.collisions) == 1
     ego_only = run_scenario(head_on_beside_the_ego(), "standard", crash=EgoContact())
     assert ego_only.outcome == "goal", ego_only.reason  # the ego drove by to its goal
     assert len(ego_only.collisions) == 1 and not ego_only.ego_collided
     assert ego_only.harm["third_party"] > 0
+
+
+def test_by_default_a_crash_is_ego_involved_and_third_party_harm_is_apart():
+    summary = run_scenario(head_on_beside_the_ego(), "standard")
+    assert summary.outcome == "goal", summary.reason
+    assert summary.ego_collisions == () and len(summary.third_party_collisions) == 1
+    assert summary.harm["third_party"] > 0
+    assert summary.harm_third_party["third_party"] == pytest.approx(summary.harm["third_party"])
+    assert summary.harm_ego_involved == {"ego": 0.0, "third_party": 0.0, "vulnerable": 0.0}
 
 
 def test_a_metric_may_not_overwrite_what_the_loop_counts():

@@ -109,11 +109,21 @@ def test_severity_thresholds():
     near, score = severity(0, 0.0, 5.0, 0.2, 0.0, th)
     assert near and score == pytest.approx(0.8)
     assert severity(0, 0.0, 5.0, math.inf, 0.1, th)[0]
-    assert severity(1, 0.3, 5.0, math.inf, 0.0, th) == (True, pytest.approx(1.3))
+    assert severity(1, 0.3, 5.0, math.inf, 0.0, th) == (True, pytest.approx(2.3))  # the ego's crash
+    third = severity(0, 0.3, 5.0, math.inf, 0.0, th, third_party_collisions=2)
+    assert third == (True, pytest.approx(1.3))  # others' collision: listed, after every crash
     assert severity(0, 0.0, math.nan, math.nan, math.nan, th) == (False, 0.0)
 
 
-@pytest.mark.parametrize("name", ["min_distance", "min_ttc", "collision_probability"])
+def test_a_close_pass_of_a_vulnerable_road_user_is_a_near_crash():
+    th = NearCrashThresholds(vulnerable_clearance=1.0)
+    # 0.06 m from a cyclist: 2 m from everything else would be no near crash
+    near, score = severity(0, 0.0, 2.0, math.inf, 0.0, th, min_distance_vulnerable=0.06)
+    assert near and score == pytest.approx(0.94)
+    assert severity(0, 0.0, 2.0, math.inf, 0.0, th, min_distance_vulnerable=1.2) == (False, 0.0)
+
+
+@pytest.mark.parametrize("name", ["min_distance", "min_ttc", "collision_probability", "vulnerable_clearance"])
 def test_thresholds_reject_bad_values(name):
     with pytest.raises(ValueError, match=name):
         NearCrashThresholds(**{name: -1.0})
@@ -187,3 +197,28 @@ def test_replay_unknown_run(tmp_path):
     args = parser().parse_args(["replay", "nope", "--root", str(tmp_path)])
     with pytest.raises(ValueError, match="RUN_ID_OR_PATH"):
         args.handler(args)
+
+
+def test_index_row_of_a_real_run_counts_third_party_collisions_apart(tmp_path):
+    from mujoco_world.loop.runner import run_scenario
+    from mujoco_world.scenario.spec import scenario_from_dict
+
+    car = {"type": "car", "behaviour": {"kind": "scripted", "speed": 10.0}}
+    scenario = scenario_from_dict(
+        {
+            "name": "others_collide",
+            "road": {"length": 300.0},
+            "ego": {"s0": 10.0, "speed": 10.0, "goal_s": 60.0},
+            "duration": 6.0,
+            "road_users": [
+                {"name": "east", "s0": 100.0, "route": {"lane": 1}, **car},
+                {"name": "west", "s0": 160.0, "route": {"lane": 0, "direction": -1}, **car},
+            ],
+        }
+    )
+    record = store_run(run_scenario(scenario, "keep_lane"), tmp_path, "others")
+    (r,) = read_index(tmp_path)
+    assert record.summary.outcome == r.outcome == "goal"
+    assert (r.collisions, r.ego_collisions, r.third_party_collisions) == (1, 0, 1)
+    assert r.max_harm_ego_involved == 0.0 and r.max_harm_measured > 0
+    assert r.near_crash and 1.0 < r.severity < 2.0
