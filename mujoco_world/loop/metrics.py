@@ -157,7 +157,7 @@ class MinDistance(Metric):
 
     def start(self, run: RunState) -> None:
         """Which road users are vulnerable."""
-        self.vulnerable = np.array([t in VULNERABLE_TYPES for t in run.world.types[1:]])
+        self.vulnerable = np.array([t in VULNERABLE_TYPES for t in run.world.types[1:]], dtype=bool)
         self.names = tuple(run.world.scene.names[1:])
         self.closest = math.inf
         self.per_user = np.full(len(self.names), math.inf)

@@ -20,6 +20,7 @@ does not change.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable, Sequence
 
@@ -28,7 +29,14 @@ import numpy as np
 from ethical_planner.harm import DEFAULT_MODEL, DEFAULT_PEDESTRIAN_MODEL
 from ethical_planner.prediction import Predictor
 from ethical_planner.road_users import Shape
-from mujoco_world.agents.ego_planner import EgoSetup, Observation, Plan, PlannerSpec, make_ego_planner
+from mujoco_world.agents.ego_planner import (
+    EgoPlanner,
+    EgoSetup,
+    Observation,
+    Plan,
+    PlannerSpec,
+    make_ego_planner,
+)
 from mujoco_world.evaluation.compare import compare_impact
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.metrics import Metric, default_metrics
@@ -71,6 +79,10 @@ class RunInterrupted(KeyboardInterrupt):
     def __init__(self, summary: RunSummary) -> None:
         super().__init__(summary.reason)
         self.summary = summary
+
+
+#: ``advance`` reached its time without a stop.
+_NOT_STOPPED = Stop("timeout", "not stopped")
 
 
 class _PlannerError(Exception):
@@ -149,14 +161,77 @@ class ClosedLoop:
 
     def execute(self) -> RunSummary:
         """Run to the end and return the summary (see ``run_scenario``)."""
+        self.start()
+        return self.resume()
+
+    def start(self) -> None:
+        """Before the first step: observers, rules and metrics start (``execute`` does it)."""
         self._start()
+
+    def advance(self, until: float) -> Stop | None:
+        """Step until the simulated time reaches ``until`` [s]; the stop verdict if the run ended first.
+
+        After ``start``; ``resume`` then runs on to the end. A run advanced to a
+        planning cycle's time and then forked (``fork``) plans that cycle with the
+        fork's planner.
+        """
+        target = int(round(until / self.world.scene.dt))
+
+        def steps() -> Stop:
+            while self.run.step < target:
+                stop = self._step()
+                if stop is not None:
+                    return stop
+            return _NOT_STOPPED
+
+        stop, interrupted = self._guarded(steps)
+        if interrupted:
+            self.finish(stop, interrupted=True)
+        return None if stop is _NOT_STOPPED else stop
+
+    def resume(self) -> RunSummary:
+        """Run on from the current state to the end and return the summary."""
         stop, interrupted = self._guarded(self._loop)
+        return self.finish(stop, interrupted)
+
+    def finish(self, stop: Stop, interrupted: bool = False) -> RunSummary:
+        """Close the run with ``stop``: open contact episodes measured, the summary built.
+
+        Raises:
+            RunInterrupted: ``interrupted`` (Ctrl-C), after the observers saw the end.
+        """
         stop = self._close(stop)
         summary = self._summary(stop)
         self.observer.on_end(summary)
         if interrupted:
             raise RunInterrupted(summary)
         return summary
+
+    def fork(self, planner: EgoPlanner | None, rules: Sequence[StopRule] = ()) -> ClosedLoop:
+        """An independent copy of this run in its current state, driven by ``planner`` from now on.
+
+        Everything that evolves is copied (world, run state, metrics, rules, the noise
+        generator; ``World.__deepcopy__``), so the copy continues exactly as the run
+        would with the new planner: forking with a planner that returns the same plans
+        gives the run's own summary bit for bit (tested). The copy has no observers
+        (nothing is recorded twice).
+
+        Args:
+            planner: the planner of the copy (None: none yet; set ``planner`` before
+                stepping it, or fork the copy again).
+            rules: stop rules checked before the run's own (``TimeLimit`` stays last).
+        """
+        memo: dict[int, object] = {id(self.observer): RunObserver()}
+        if self.planner is not None:
+            memo[id(self.planner)] = None
+        new = copy.deepcopy(self, memo)
+        new.planner = planner
+        new.observer_interval = 1
+        for rule in rules:
+            rule.start(new.run)
+        check_rules(rules)
+        new.rules = (*rules, *new.rules)
+        return new
 
     def _start(self) -> None:
         run = self.run

@@ -8,6 +8,7 @@ ego's planned trajectory (``set_ego_plan``) and asks it for observations
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections import deque
@@ -177,6 +178,31 @@ class World:
         self._sample_history()
         # Velocities at recent controller updates, for the measured accelerations.
         self._velocity_history: deque[tuple[float, np.ndarray]] = deque(maxlen=64)
+
+    def __deepcopy__(self, memo: dict[int, object]) -> World:
+        """An independent copy of the world in its current state, to branch a run from.
+
+        What never changes during a run is shared, not copied: the scenario and its
+        road-user specs and routes, the built road, the ego's route and the MuJoCo model
+        (``Scene.__deepcopy__``). Everything that evolves (MuJoCo data, behaviours,
+        controllers, contact episodes, histories) is copied; the copy and the original
+        step to bit-identical states (tested).
+        """
+        fleet = self.fleet
+        for shared in (
+            self.scenario,
+            self.scenario.road_users,
+            self.road,
+            self.ego_path,
+            fleet.specs,
+            fleet.routes,
+        ):
+            memo[id(shared)] = shared
+        new = World.__new__(World)
+        memo[id(self)] = new
+        for name, value in self.__dict__.items():
+            setattr(new, name, copy.deepcopy(value, memo))
+        return new
 
     # ------------------------------------------------------------------ setup
 

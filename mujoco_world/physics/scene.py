@@ -10,6 +10,7 @@ views ``qpos``, ``qvel`` and ``ctrl`` (columns x, y, yaw).
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
@@ -329,6 +330,25 @@ class Scene:
             bad = (e1 != NO_ENTITY) & (e2 != NO_ENTITY) & (e1 != e2) & (data.contact.dist < -tolerance)
             pairs = zip(e1[bad].tolist(), e2[bad].tolist(), strict=True)
         return list(dict.fromkeys((int(a), int(b)) for a, b in pairs))
+
+    def __deepcopy__(self, memo: dict[int, object]) -> Scene:
+        """An independent copy of the scene in its current state (``data`` copied).
+
+        The ``model`` is shared: nothing changes it after the scene is built. ``qpos``,
+        ``qvel`` and ``ctrl`` are views into ``data``; a plain deep copy would detach them
+        from the copied ``data``, so they are made again from it. Stepping the copy and
+        the original gives bit-identical states (tested).
+        """
+        new = Scene.__new__(Scene)
+        memo[id(self)] = new
+        memo[id(self.model)] = self.model
+        for name, value in self.__dict__.items():
+            if name not in ("qpos", "qvel", "ctrl"):
+                setattr(new, name, copy.deepcopy(value, memo))
+        new.qpos = new.data.qpos.reshape(new.n, 3)
+        new.qvel = new.data.qvel.reshape(new.n, 3)
+        new.ctrl = new.data.ctrl.reshape(new.n, 3)
+        return new
 
     @property
     def time(self) -> float:
