@@ -48,10 +48,8 @@ from mujoco_world.agents.ego_planner import EgoSetup, PlannerSpec
 from mujoco_world.agents.scripted import ScriptedPlanner
 from mujoco_world.evaluation.avoidability import Avoidability, BranchResult, ManoeuvreSpec
 from mujoco_world.loop.config import RunConfig
-from mujoco_world.loop.metrics import default_metrics
-from mujoco_world.loop.observers import RunObserver
-from mujoco_world.loop.rules import EgoContact, Stop, default_rules
-from mujoco_world.loop.runner import ClosedLoop
+from mujoco_world.loop.rules import Stop
+from mujoco_world.loop.runner import ClosedLoop, closed_loop
 from mujoco_world.loop.state import RunState
 from mujoco_world.loop.summary import RunSummary
 from mujoco_world.scenario.spec import Scenario
@@ -242,16 +240,7 @@ def _replay(
         (copies by branch time from the first cycle at which the partner was seen,
         that earliest branch time, the re-simulated run's summary).
     """
-    loop = ClosedLoop(
-        scenario,
-        planner,
-        seed,
-        config,
-        RunObserver(),
-        default_rules(config),
-        default_metrics(config),
-        EgoContact(),
-    )
+    loop = closed_loop(scenario, planner, seed, config)
     loop.start()
     cycle = loop.steps_per_cycle * loop.world.scene.dt
     n_crash = int(math.floor(crash_time / cycle - 1e-9))

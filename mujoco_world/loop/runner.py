@@ -65,6 +65,7 @@ __all__ = [
     "RunInterrupted",
     "RunObserver",
     "RunSummary",
+    "closed_loop",
     "run_scenario",
 ]
 
@@ -376,6 +377,37 @@ class ClosedLoop:
         )
 
 
+def closed_loop(
+    scenario: Scenario,
+    planner: PlannerSpec = "ethical",
+    seed: int = 0,
+    config: RunConfig | None = None,
+    observer: RunObserver | None = None,
+    predictor: Predictor | None = None,
+    *,
+    rules: Sequence[StopRule] | None = None,
+    metrics: Sequence[Metric] | None = None,
+    crash: CrashCriterion | None = None,
+) -> ClosedLoop:
+    """The closed loop of one run, not started: ``run_scenario`` with the defaults filled in.
+
+    Step it yourself (``start``, ``advance``, ``fork``, ``resume``) to branch a run;
+    the arguments are those of ``run_scenario``.
+    """
+    config = config or RunConfig()
+    return ClosedLoop(
+        scenario,
+        planner,
+        seed,
+        config,
+        observer or RunObserver(),
+        default_rules(config) if rules is None else rules,
+        default_metrics(config) if metrics is None else metrics,
+        crash or EgoContact(),
+        predictor,
+    )
+
+
 def run_scenario(
     scenario: Scenario,
     planner: PlannerSpec = "ethical",
@@ -417,16 +449,7 @@ def run_scenario(
         ValueError: an unknown planner or a scenario that cannot be built.
         RunInterrupted: Ctrl-C (a ``KeyboardInterrupt``), after the run was closed as failed.
     """
-    config = config or RunConfig()
-    loop = ClosedLoop(
-        scenario,
-        planner,
-        seed,
-        config,
-        observer or RunObserver(),
-        default_rules(config) if rules is None else rules,
-        default_metrics(config) if metrics is None else metrics,
-        crash or EgoContact(),
-        predictor,
+    loop = closed_loop(
+        scenario, planner, seed, config, observer, predictor, rules=rules, metrics=metrics, crash=crash
     )
     return loop.execute()

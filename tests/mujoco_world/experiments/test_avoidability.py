@@ -8,11 +8,7 @@ import pytest
 
 from mujoco_world.evaluation.avoidability import ManoeuvreSpec
 from mujoco_world.experiments.avoidability import AvoidabilityFamily, search
-from mujoco_world.loop.config import RunConfig
-from mujoco_world.loop.metrics import default_metrics
-from mujoco_world.loop.observers import RunObserver
-from mujoco_world.loop.rules import EgoContact, default_rules
-from mujoco_world.loop.runner import ClosedLoop, run_scenario
+from mujoco_world.loop.runner import closed_loop, run_scenario
 from mujoco_world.scenario.spec import scenario_from_dict
 
 
@@ -64,24 +60,10 @@ def rear_ended_at_once():
     )
 
 
-def _loop(scenario, planner="keep_lane", seed=0):
-    config = RunConfig()
-    return ClosedLoop(
-        scenario,
-        planner,
-        seed,
-        config,
-        RunObserver(),
-        default_rules(config),
-        default_metrics(config),
-        EgoContact(),
-    )
-
-
 def test_a_fork_continued_with_the_same_planner_is_the_run_itself():
     scenario = parked_car_ahead()
     whole = run_scenario(scenario, "keep_lane")
-    loop = _loop(scenario)
+    loop = closed_loop(scenario, "keep_lane")
     loop.start()
     assert loop.advance(2.0) is None
     fork = loop.fork(loop.planner)
