@@ -33,6 +33,12 @@ HARM_LEGEND = (
 )
 
 
+def _verdict(row) -> str:  # noqa: ANN001 - an IndexRow
+    if row.avoidable is not None:
+        return "yes" if row.avoidable else "no"
+    return "?" if row.ego_collisions else "-"
+
+
 def _near_crash(args: argparse.Namespace) -> int:
     if args.top is not None and args.top < 1:
         raise ValueError(f"--top must be >= 1, got {args.top}")
@@ -57,12 +63,13 @@ def _near_crash(args: argparse.Namespace) -> int:
             f"{r.ego_collisions:>3} {r.third_party_collisions:>3} "
             f"{_fmt(r.max_harm_measured):>9} {_fmt(r.max_harm_predicted):>9} "
             f"{_fmt(r.min_distance, 2):>6} {_fmt(r.min_distance_vulnerable, 2):>6} {_fmt(r.min_ttc, 2):>6} "
-            f"{_fmt(r.max_collision_probability):>6}  {r.recording or '-'}"
+            f"{_fmt(r.max_collision_probability):>6} {_verdict(r):>5}  {r.recording or '-'}"
         )
     print(HARM_LEGEND)
     print("ego / 3rd: collisions the ego took part in (a crash) / between other road users (ranked after")
     print("crashes). min d / VRU d: smallest ego distance to any / a vulnerable road user [m]; ttc: smallest")
-    print("time-to-collision [s]; p max: highest planned collision probability.")
+    print("time-to-collision [s]; p max: highest planned collision probability; avoid: the ego collision")
+    print("was avoidable (etp avoidability ROOT; ?: not searched yet).")
     print(f"Open a run: etp replay RUN_ID --root {args.dir}")
     return 0
 
@@ -90,8 +97,66 @@ def _replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_folders(paths: list[str]) -> list[Path]:
+    """Run folders named on the command line: a run folder, its ``summary.json``, or an output root."""
+    from mujoco_world.storage.run_record import RECORD_FILE, iter_records
+
+    folders: list[Path] = []
+    for text in paths:
+        path = Path(text)
+        if path.is_file() and path.name == RECORD_FILE:
+            path = path.parent
+        if (path / RECORD_FILE).is_file():
+            folders.append(path)
+        elif path.is_dir():
+            folders += [p.parent for p, _ in iter_records(path)]
+        else:
+            raise ValueError(f"RUN_DIR: {path} is no run folder, summary.json or output root")
+    return folders
+
+
+def _avoidability(args: argparse.Namespace) -> int:
+    from harm_calibration.cli.common import planner_configs, show_progress
+    from harm_calibration.cli.process import keep_freed_memory
+    from mujoco_world.experiments.avoidability import AvoidabilityFamily, search_crashes
+    from mujoco_world.storage.run_record import read_record
+
+    if args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    if not 0.0 < args.lookback <= 60.0:
+        raise ValueError(f"--lookback must lie in (0, 60] s, got {args.lookback}")
+    family = AvoidabilityFamily(lookback=args.lookback)
+    folders = _run_folders(args.run)
+    planners = {}
+    if args.config is not None:
+        for name in sorted({read_record(f).summary.planner for f in folders}):
+            (config,) = planner_configs([name.split("+")[0]], args.config)
+            if config.name == name:
+                planners[name] = config
+    results = search_crashes(
+        folders, planners, family, args.workers, show_progress(args), worker_initializer=keep_freed_memory
+    )
+    if args.json:
+        print_json(
+            [
+                {"run": str(f), "avoidability": r.to_dict()["avoidability"]}
+                if not isinstance(r, str)
+                else {"run": str(f), "error": r}
+                for f, r in results
+            ]
+        )
+    else:
+        print(f"{len(results)} run(s) with an ego collision among {len(folders)}")
+        for folder, result in results:
+            if isinstance(result, str):
+                print(f"{folder.name}: search failed: {result}")
+            else:
+                print(f"{folder.name}: {result.avoidability.describe()}")
+    return 1 if any(isinstance(r, str) for _, r in results) else 0
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``near-crash`` and ``replay`` to ``etp``."""
+    """Add ``near-crash``, ``replay`` and ``avoidability`` to ``etp``."""
     p = subparsers.add_parser(
         "near-crash",
         help="list the near-crash runs of an output root, worst first",
@@ -120,3 +185,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_json(p)
     p.set_defaults(handler=_replay)
+    p = subparsers.add_parser(
+        "avoidability",
+        help="search whether each ego collision of stored runs was avoidable",
+        description="For every run with an ego-involved collision: re-simulate it with its own planner, "
+        "world and seed, copy the closed loop at every planning cycle from the first sight of the "
+        "collision partner (at most --lookback s before the collision), and try a family of open-loop "
+        "manoeuvres from each copy (brake profiles, swerves, lane changes, swerve-and-brake within the "
+        "friction circle). Avoidable: some manoeuvre avoids every ego contact until 2 s after the "
+        "collision. The verdict is stored in the run's summary.json and index row "
+        "(see mujoco_world.experiments.avoidability).",
+    )
+    p.add_argument(
+        "run", nargs="+", metavar="RUN_DIR", help="run folder, its summary.json, or an output root"
+    )
+    p.add_argument("--lookback", type=float, default=5.0, help="earliest branch before the collision [s]")
+    p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        metavar="FILE.toml",
+        help="the planner configuration the runs used with etp demo/run --config",
+    )
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_json(p)
+    p.set_defaults(handler=_avoidability)

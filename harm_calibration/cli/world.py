@@ -98,6 +98,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--scenario-seed", type=int, default=0, help="seed of the random variants, >= 0 (default 0)"
     )
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument(
+        "--avoidability",
+        action="store_true",
+        help="after the runs, search whether each ego collision was avoidable (etp avoidability)",
+    )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_json(p)
     _predictor_argument(p)
@@ -112,6 +117,32 @@ def _predictor_argument(parser: argparse.ArgumentParser) -> None:
         help="predictor of the planner (constant_acceleration, constant_turn_rate, learned; "
         "default: the planner configuration's)",
     )
+
+
+def _search_avoidability(args: argparse.Namespace, tasks: list, results: list) -> list:
+    """Search every ego collision of a batch (in parallel); the results with their verdicts."""
+    from mujoco_world.experiments.avoidability import search_crashes
+    from mujoco_world.experiments.batch import TaskResult
+
+    planners = {t.planner: t.planner_config for t in tasks if t.planner_config is not None}
+    clock = time.perf_counter()
+    found = dict(
+        search_crashes(
+            [t.run_dir for t in tasks],
+            planners,
+            workers=args.workers,
+            progress=show_progress(args),
+            worker_initializer=keep_freed_memory,
+        )
+    )
+    failed = {folder: why for folder, why in found.items() if isinstance(why, str)}
+    for folder, why in failed.items():
+        say(args, f"avoidability search of {folder.name} failed: {why}")
+    say(args, f"avoidability: {len(found)} ego collision(s) searched in {time.perf_counter() - clock:.1f} s")
+    return [
+        TaskResult(found[t.run_dir], r.resumed) if t.run_dir in found and t.run_dir not in failed else r
+        for t, r in zip(tasks, results, strict=True)
+    ]
 
 
 def _run_config(args: argparse.Namespace, **fields: object):  # noqa: ANN202 - RunConfig, imported lazily
@@ -304,6 +335,8 @@ def _demo(args: argparse.Namespace) -> int:
         progress=show_progress(args),
         worker_initializer=keep_freed_memory,
     )
+    if args.avoidability:
+        results = _search_avoidability(args, tasks, results)
     wall = time.perf_counter() - start
     path = write_aggregate(root, results, wall)
     resumed = sum(1 for r in results if r.resumed)

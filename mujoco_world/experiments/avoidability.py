@@ -35,16 +35,19 @@ times avoided the collision; the best (least ego-involved harm) is reported.
 from __future__ import annotations
 
 import math
+import multiprocessing
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from ethical_planner.config import VehicleConfig
 from ethical_planner.road_users import Shape
 from ethical_planner.validation import check, check_positive
-from mujoco_world.agents.ego_planner import EgoSetup, PlannerSpec
+from mujoco_world.agents.ego_planner import EGO_PLANNERS, EgoSetup, PlannerSpec
 from mujoco_world.agents.scripted import ScriptedPlanner
 from mujoco_world.evaluation.avoidability import Avoidability, BranchResult, ManoeuvreSpec
 from mujoco_world.loop.config import RunConfig
@@ -52,7 +55,10 @@ from mujoco_world.loop.rules import Stop
 from mujoco_world.loop.runner import ClosedLoop, closed_loop
 from mujoco_world.loop.state import RunState
 from mujoco_world.loop.summary import RunSummary
+from mujoco_world.scenario.sources import resolve_scenario
 from mujoco_world.scenario.spec import Scenario
+from mujoco_world.storage.run_folder import store_avoidability
+from mujoco_world.storage.run_record import RunRecord, read_record
 
 #: Peak lateral acceleration of the quintic lateral move per metre over duration^2
 #: (max |d''| of 10u^3 - 15u^4 + 6u^5 is 10 / sqrt(3)).
@@ -365,4 +371,112 @@ def _explore(run: _Search, family: AvoidabilityFamily) -> BranchResult | None:
     return min(run.tried.values(), key=_rank)
 
 
-__all__ = ["AvoidabilityFamily", "search"]
+def planner_of(record: RunRecord, planner: PlannerSpec | None = None) -> PlannerSpec:
+    """The planner a stored run ran with: ``planner`` if given, else its registered name or file.
+
+    Raises:
+        ValueError: the run's planner is neither registered nor a file (a configuration
+            given on the command line): pass it as ``planner``.
+    """
+    if planner is not None:
+        return planner
+    source = record.planner_source or record.summary.planner
+    if source in EGO_PLANNERS.names() or source.endswith(".toml"):
+        return source
+    raise ValueError(
+        f"run {record.run_id}: its planner {source!r} is not a registered name or file; pass the "
+        f"planner configuration it ran with (etp avoidability --config FILE.toml)"
+    )
+
+
+def search_record(
+    record: RunRecord, planner: PlannerSpec | None = None, family: AvoidabilityFamily | None = None
+) -> Avoidability:
+    """``search`` on a stored run (scenario, planner, seed and loop settings from its record).
+
+    Raises:
+        ValueError: no ego collision, an unknown planner (see ``planner_of``), or a run
+            that does not reproduce.
+    """
+    summary = record.summary
+    scenario = resolve_scenario(record.scenario_source or summary.scenario)
+    return search(scenario, planner_of(record, planner), summary.seed, summary, record.config, family)
+
+
+def search_run_folder(
+    folder: str | Path, planner: PlannerSpec | None = None, family: AvoidabilityFamily | None = None
+) -> RunRecord:
+    """Search a stored run and store the verdict in its record and index (``store_avoidability``)."""
+    record = read_record(folder)
+    verdict = search_record(record, planner, family)
+    return store_avoidability(Path(folder) if Path(folder).is_dir() else Path(folder).parent, verdict)
+
+
+def _search_in_worker(
+    folder: str, planner: PlannerSpec | None, family: AvoidabilityFamily | None
+) -> RunRecord:
+    return search_run_folder(folder, planner, family)
+
+
+def search_crashes(
+    folders: Sequence[str | Path],
+    planners: dict[str, PlannerSpec] | None = None,
+    family: AvoidabilityFamily | None = None,
+    workers: int = 2,
+    progress: bool = False,
+    worker_initializer: Callable[[], object] | None = None,
+) -> list[tuple[Path, RunRecord | str]]:
+    """Search every run folder whose record holds an ego collision, on ``workers`` processes.
+
+    Args:
+        folders: run folders (runs without an ego collision are skipped).
+        planners: planner by the runs' planner name, for runs whose planner is not
+            registered (``--config``); others are resolved from their record.
+        family: the manoeuvres and windows.
+        workers: processes (1: in this process).
+        progress: show a progress bar.
+        worker_initializer: called once in each worker process.
+
+    Returns:
+        (folder, the record with its verdict, or the error message) per searched run,
+        in the order of ``folders``.
+    """
+    from tqdm import tqdm
+
+    planners = planners or {}
+    todo = []
+    for folder in map(Path, folders):
+        record = read_record(folder)
+        if record.summary.ego_collisions and record.summary.outcome != "failed":
+            todo.append((folder, planners.get(record.summary.planner)))
+    results: dict[Path, RunRecord | str] = {}
+    bar = tqdm(total=len(todo), disable=not progress, unit="crash", desc="avoidability", dynamic_ncols=True)
+    if workers == 1 or len(todo) <= 1:
+        for folder, planner in todo:
+            try:
+                results[folder] = search_run_folder(folder, planner, family)
+            except ValueError as error:
+                results[folder] = str(error)
+            bar.update(1)
+    else:
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(workers, mp_context=context, initializer=worker_initializer) as pool:
+            futures = {pool.submit(_search_in_worker, str(f), p, family): f for f, p in todo}
+            for future in as_completed(futures):
+                try:
+                    results[futures[future]] = future.result()
+                except Exception as error:  # noqa: BLE001 - one failing search does not stop the others
+                    results[futures[future]] = f"{type(error).__name__}: {error}"
+                bar.update(1)
+    bar.close()
+    return [(f, results[f]) for f, _ in todo]
+
+
+__all__ = [
+    "AvoidabilityFamily",
+    "planner_of",
+    "search",
+    "search_crashes",
+    "search_record",
+    "search_run_folder",
+]

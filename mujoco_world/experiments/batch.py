@@ -303,6 +303,12 @@ def aggregate_row(record: RunRecord) -> dict[str, Any]:
         "min_distance": _finite_or_none(s.min_distance),
         "min_distance_vulnerable": _finite_or_none(s.min_distance_vulnerable),
         "clearance_vulnerable": dict(s.clearance_vulnerable),
+        "avoidable": record.avoidability.avoidable if record.avoidability is not None else None,
+        "avoidance": (
+            record.avoidability.best.manoeuvre.describe()
+            if record.avoidability is not None and record.avoidability.best is not None
+            else None
+        ),
         "wall_time": s.timings.get("total"),
     }
 
@@ -313,7 +319,15 @@ def _outcome_label(s: RunSummary) -> str:
     return "goal~" if s.outcome == "goal" and close else s.outcome
 
 
-def _table_line(s: RunSummary) -> str:
+def _avoidable(record: RunRecord) -> str:
+    """``yes``/``no`` for a searched ego collision, ``?`` for an unsearched one, ``-`` without."""
+    if record.avoidability is not None:
+        return "yes" if record.avoidability.avoidable else "no"
+    return "?" if record.summary.ego_collisions else "-"
+
+
+def _table_line(record: RunRecord) -> str:
+    s = record.summary
     risk, harm = s.max_risk, s.harm_ego_involved
     third_harm = sum(v for v in s.harm_third_party.values() if math.isfinite(v))
     return (
@@ -323,12 +337,14 @@ def _table_line(s: RunSummary) -> str:
         f"{_fmt(risk.get('vulnerable')):>7} "
         f"{_fmt(harm.get('ego'), 3):>7} {_fmt(harm.get('third_party'), 3):>6} "
         f"{_fmt(harm.get('vulnerable'), 3):>6} {_fmt(third_harm, 3):>7} "
-        f"{_fmt(s.min_distance, 2):>6} {_fmt(s.min_distance_vulnerable, 2):>6}"
+        f"{_fmt(s.min_distance, 2):>6} {_fmt(s.min_distance_vulnerable, 2):>6} {_avoidable(record):>5}"
     )
 
 
-def _planner_totals(planner: str, mine: Sequence[RunSummary]) -> str:
+def _planner_totals(planner: str, records: Sequence[RunRecord]) -> str:
+    mine = [r.summary for r in records]
     counts = {o: sum(1 for s in mine if s.outcome == o) for o in OUTCOMES}
+    verdicts = [_avoidable(r) for r in records]
     close = sum(1 for s in mine if _outcome_label(s) == "goal~")
     mean_risk = {g: sum(s.max_risk.get(g, 0.0) for s in mine) / max(len(mine), 1) for g in GROUPS}
     harm = {g: sum(s.harm_ego_involved.get(g, 0.0) for s in mine) for g in GROUPS}
@@ -337,7 +353,8 @@ def _planner_totals(planner: str, mine: Sequence[RunSummary]) -> str:
     return (
         f"  {planner:<9} {len(mine):>3} runs  "
         + " ".join(f"{k} {v}" for k, v in counts.items())
-        + f" (goal~ {close})  3rd-party collisions {third}"
+        + f" (goal~ {close}; ego collisions avoidable {verdicts.count('yes')}, not avoidable "
+        + f"{verdicts.count('no')}, not searched {verdicts.count('?')})  3rd-party collisions {third}"
         + "  | max risk ego {ego:.4f} 3rd {third_party:.4f} VRU {vulnerable:.4f}".format(**mean_risk)
         + "  | ego-involved harm ego {ego:.3f} 3rd {third_party:.3f} VRU {vulnerable:.3f}".format(**harm)
         + f"  | 3rd-party harm {third_harm:.3f}"
@@ -350,11 +367,11 @@ def comparison_table(records: Iterable[RunRecord]) -> str:
     A crash is an ego-involved collision; collisions between other road users are
     counted and their harm summed apart ("3rd" columns).
     """
-    runs = sorted((r.summary for r in records), key=lambda s: (s.scenario, s.planner, s.seed))
+    runs = sorted(records, key=lambda r: (r.summary.scenario, r.summary.planner, r.summary.seed))
     head = (
         f"{'scenario':<30} {'planner':<9} {'seed':>4} {'outcome':<8} {'t [s]':>6} {'ego':>3} {'3rd':>3} "
         f"{'risk ego':>8} {'3rd':>7} {'VRU':>7} {'harm ego':>7} {'3rd':>6} {'VRU':>6} {'3rd-pty':>7} "
-        f"{'min d':>6} {'VRU d':>6}"
+        f"{'min d':>6} {'VRU d':>6} {'avoid':>5}"
     )
     lines = [head, "-" * len(head)]
     lines += [_table_line(s) for s in runs]
@@ -365,12 +382,14 @@ def comparison_table(records: Iterable[RunRecord]) -> str:
         "harm ego 3rd VRU: measured harm per group in the ego's collisions; 3rd-pty: measured harm in "
         "third-party collisions;",
         f"min d / VRU d: smallest ego distance to any road user / a vulnerable one [m]; goal~: a goal "
-        f"passing a vulnerable road user closer than {VULNERABLE_CLEARANCE} m",
+        f"passing a vulnerable road user closer than {VULNERABLE_CLEARANCE} m;",
+        "avoid: the ego collision was avoidable by an open-loop manoeuvre (etp avoidability; ?: not "
+        "searched, -: no ego collision)",
         "",
         "per planner: runs, outcomes, mean of max risk per group, summed measured harm per group",
     ]
-    for planner in sorted({s.planner for s in runs}):
-        lines.append(_planner_totals(planner, [s for s in runs if s.planner == planner]))
+    for planner in sorted({r.summary.planner for r in runs}):
+        lines.append(_planner_totals(planner, [r for r in runs if r.summary.planner == planner]))
     return "\n".join(lines)
 
 

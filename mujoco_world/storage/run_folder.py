@@ -27,11 +27,12 @@ from pathlib import Path
 
 from ethical_planner.config import PRESETS, PlannerConfig, preset
 from ethical_planner.records import to_plain
+from mujoco_world.evaluation.avoidability import Avoidability
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.summary import RunSummary
 from mujoco_world.storage.recording import RECORDING_FILE
 from mujoco_world.storage.run_index import INDEX_FILE, NearCrashThresholds, append_row, find_run, make_row
-from mujoco_world.storage.run_record import RunRecord, write_record
+from mujoco_world.storage.run_record import RunRecord, read_record, write_record
 
 #: Allowed values of ``keep``.
 KEEP_CHOICES = ("all", "near_crash")
@@ -167,6 +168,24 @@ def store_run(
     if write:
         write_record(run_dir(out, run), record)
     append_row(out, row)
+    return record
+
+
+def store_avoidability(run_folder: str | Path, verdict: Avoidability) -> RunRecord:
+    """Add the avoidability verdict to a stored run: its record rewritten, its index row appended.
+
+    The row goes to the index of the run folder's parent (the output root) if there is
+    one; ``read_index`` keeps the latest row of a run, so the verdict replaces the
+    earlier row.
+
+    Raises:
+        ValueError: the folder holds no readable run record.
+    """
+    folder = Path(run_folder)
+    record = dataclasses.replace(read_record(folder), avoidability=verdict)
+    write_record(folder, record)
+    if (folder.parent / INDEX_FILE).is_file():
+        append_row(folder.parent, make_row(record))
     return record
 
 

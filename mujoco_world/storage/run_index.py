@@ -110,6 +110,8 @@ class IndexRow:
             the ego's collisions (0 without).
         min_distance_vulnerable: smallest ego distance to a vulnerable road user [m]
             (nan without one).
+        avoidable: the avoidability search's verdict on the ego collision (None: not
+            searched, or no ego collision).
         min_ttc: [s] (inf if no approach within the horizon, nan if unknown).
         max_collision_probability: highest planned collision probability (nan if unknown).
         max_risk: highest risk per group (ego, third_party, vulnerable).
@@ -139,6 +141,7 @@ class IndexRow:
     third_party_collisions: int = 0
     max_harm_ego_involved: float = 0.0
     min_distance_vulnerable: float = math.nan
+    avoidable: bool | None = None
 
     def to_json(self) -> str:
         """One JSON line (non-finite floats as strings "inf"/"nan" so they survive JSON)."""
@@ -163,10 +166,10 @@ class IndexRow:
             kinds = _FIELD_KINDS.get(name)
             if kinds is None:
                 continue
-            is_bool = isinstance(value, bool)  # a bool is an int to isinstance; here it is not
-            if (is_bool and bool not in kinds) or (
-                not is_bool and (bool in kinds or not isinstance(value, kinds))
-            ):
+            # a bool is an int to isinstance; here it is not
+            others = tuple(k for k in kinds if k is not bool)
+            fits = bool in kinds if isinstance(value, bool) else isinstance(value, others)
+            if not fits:
                 what = {str: "a string", int: "an integer", float: "a number", bool: "true or false"}
                 what |= {dict: "a table", type(None): "null"}
                 wanted = " or ".join(what[k] for k in kinds if not (k is int and float in kinds))
@@ -200,6 +203,7 @@ _FIELD_KINDS: dict[str, tuple[type, ...]] = {
     "third_party_collisions": (int,),
     "max_harm_ego_involved": (int, float),
     "min_distance_vulnerable": (int, float),
+    "avoidable": (bool, type(None)),
 }
 
 
@@ -320,6 +324,7 @@ def make_row(record: RunRecord, thresholds: NearCrashThresholds | None = None) -
         third_party_collisions=len(third),
         max_harm_ego_involved=harm_of(ego),
         min_distance_vulnerable=float(summary.min_distance_vulnerable),
+        avoidable=record.avoidability.avoidable if record.avoidability is not None else None,
     )
 
 

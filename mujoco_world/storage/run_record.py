@@ -5,8 +5,9 @@ Every run folder holds ``summary.json``: one JSON object with
 * ``"format": "etp-run-record"`` and ``"version"`` (``RECORD_VERSION``);
 * the run's identity and settings: ``run_id``, ``scenario_source`` (catalog or
   generated name, or the resolved path of a scenario file), ``planner_source``
-  (planner name or configuration file), ``config`` (the loop's ``RunConfig``) and
-  ``recording`` (path of the kept ``.rrd`` file, or null);
+  (planner name or configuration file), ``config`` (the loop's ``RunConfig``),
+  ``recording`` (path of the kept ``.rrd`` file, or null) and ``avoidability`` (the
+  verdict of ``etp avoidability`` on an ego collision, or null);
 * every field of ``mujoco_world.loop.summary.RunSummary`` at the top level: outcome,
   reason, the bodies (id, name, type, length, width, mass), the collisions (each an
   ``ImpactRecord``: measurement and model prediction per body) and the metrics.
@@ -32,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from ethical_planner.records import from_mapping, to_plain
+from mujoco_world.evaluation.avoidability import Avoidability
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.summary import RunSummary
 
@@ -62,6 +64,8 @@ class RunRecord:
             planner configuration file.
         config: loop settings of the run (None if it failed before the loop started).
         recording: path of the run's ``.rrd`` recording, or None if none was kept.
+        avoidability: the avoidability search's verdict on the run's ego collision
+            (``mujoco_world.experiments.avoidability``), or None if not searched.
     """
 
     run_id: str
@@ -70,6 +74,7 @@ class RunRecord:
     planner_source: str = ""
     config: RunConfig | None = None
     recording: str | None = None
+    avoidability: Avoidability | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON object of ``summary.json`` (format and version first)."""
@@ -100,6 +105,8 @@ class RunRecord:
         try:
             summary = from_mapping(RunSummary, body, "")
             config = from_mapping(RunConfig, head["config"], "config") if head.get("config") else None
+            verdict = head.get("avoidability")
+            avoidability = from_mapping(Avoidability, verdict, "avoidability") if verdict else None
             return cls(
                 run_id=_text(head, "run_id"),
                 summary=summary,
@@ -107,6 +114,7 @@ class RunRecord:
                 planner_source=str(head.get("planner_source", "")),
                 config=config,
                 recording=head.get("recording"),
+                avoidability=avoidability,
             )
         except ValueError as error:
             raise ValueError(f"{where}: {error}") from None
