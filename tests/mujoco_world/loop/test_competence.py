@@ -115,7 +115,8 @@ class _Decisions:
         outer = self
 
         class Observer(RunObserver):
-            def on_cycle(self, decision, time):
+            def on_cycle(self, plan, time):
+                decision = plan.decision
                 outer.cycles.append(
                     (time, decision.level, decision.max_risk_refused, decision.trajectory.y[0])
                 )
