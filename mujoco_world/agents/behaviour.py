@@ -18,7 +18,7 @@ import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -26,6 +26,7 @@ from ethical_planner.geometry import rectangle_half_extent
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.registry import Registry
 from ethical_planner.road_users import LegalCorridor, RoadUserType
+from mujoco_world.agents.recorded import RecordedTracks
 from mujoco_world.scenario.spec import BehaviourKind, RoadUserSpec
 
 #: Resampling step of the routes [m].
@@ -192,16 +193,54 @@ class Fleet:
         self._kind = [u.behaviour.kind for u in self.specs]
         self._models_by_kind = {kind: BEHAVIOURS.get(kind.value) for kind in dict.fromkeys(self._kind)}
         self._kind_mask = {kind: np.array([k is kind for k in self._kind]) for kind in self._models_by_kind}
+        # Models that give the motion of their bodies themselves (recordings): their rows
+        # and the state their ``setup`` built.
+        self._given: list[tuple[GivenMotion, np.ndarray, Any]] = []
+        for kind, model in self._models_by_kind.items():
+            if isinstance(model, GivenMotion):
+                rows = np.flatnonzero(self._kind_mask[kind])
+                self._given.append((model, rows, model.setup(self, rows)))
 
     # ------------------------------------------------------------------ states
 
     def initial_poses(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(x, y, yaw, speed) of every road user at the start, each (k,)."""
+        """(x, y, yaw, speed along the heading) of every road user at the start, each (k,)."""
         if not self.k:
             empty = np.zeros(0)
             return empty, empty, empty, empty
         x, y, theta, _ = self.routes.lookup(self.rows, self.s)
-        return x, y, theta, self.v.copy()
+        speed = self.v.copy()
+        for model, rows, state in self._given:
+            p, v, _, yaw, _ = model.references(state, 0.0)
+            x[rows], y[rows], theta[rows] = p[:, 0], p[:, 1], yaw
+            speed[rows] = v[:, 0] * np.cos(yaw) + v[:, 1] * np.sin(yaw)
+        return x, y, theta, speed
+
+    def initial_velocities(self) -> np.ndarray:
+        """(k, 2) velocities [m/s] of every road user at the start."""
+        x, y, theta, speed = self.initial_poses()
+        vel = np.column_stack([speed * np.cos(theta), speed * np.sin(theta)])
+        for model, rows, state in self._given:
+            vel[rows] = model.references(state, 0.0)[1]
+        return vel
+
+    def presence(self, time: float) -> np.ndarray:
+        """(k,) bool: which road users exist in the world at ``time`` [s].
+
+        Route-following road users always do; a model giving its bodies' motion
+        decides for its rows (a recording exists while it lasts).
+        """
+        present = np.ones(self.k, dtype=bool)
+        for model, rows, state in self._given:
+            present[rows] = model.presence(state, time)
+        return present
+
+    @property
+    def given_rows(self) -> np.ndarray:
+        """Rows whose motion a model gives (recordings), sorted."""
+        if not self._given:
+            return np.zeros(0, dtype=int)
+        return np.sort(np.concatenate([rows for _, rows, _ in self._given]))
 
     def references(self, time: float) -> tuple[np.ndarray, ...]:
         """Advance the intended states to ``time`` [s] and return controller references.
@@ -224,7 +263,10 @@ class Fleet:
         lat = v * v * kappa + self.d_accel
         acc = np.column_stack([a * c - lat * s, a * s + lat * c])
         yaw = theta + np.arctan2(self.d_rate, np.maximum(v, 0.5))
-        return p, vel, acc, yaw, v * kappa
+        rate = v * kappa
+        for model, rows, state in self._given:
+            p[rows], vel[rows], acc[rows], yaw[rows], rate[rows] = model.references(state, time)
+        return p, vel, acc, yaw, rate
 
     def deactivate(self, mask: np.ndarray) -> None:
         """Stop the behaviours of crashed road users (``mask`` (k,) bool)."""
@@ -324,6 +366,29 @@ class BehaviourModel(Protocol):
         ...
 
 
+@runtime_checkable
+class GivenMotion(Protocol):
+    """A behaviour whose bodies' motion is given in advance (a recording), not decided.
+
+    Besides ``BehaviourModel`` it builds, once per fleet, the state of its rows
+    (``setup``) and answers, for all of them at once, where they should be
+    (``references``, the tracking controller's references) and whether they exist
+    (``presence``). The Fleet uses these instead of the route for its rows.
+    """
+
+    def setup(self, fleet: Fleet, rows: np.ndarray) -> Any:
+        """The state of rows ``rows`` (m,) of this kind."""
+        ...
+
+    def references(self, state: Any, time: float) -> tuple[np.ndarray, ...]:
+        """(p (m, 2), v (m, 2), a (m, 2), yaw (m,), yaw rate (m,)) at ``time`` [s]."""
+        ...
+
+    def presence(self, state: Any, time: float) -> np.ndarray:
+        """(m,) bool: which of the rows exist at ``time`` [s]."""
+        ...
+
+
 #: Behaviour models by ``BehaviourKind`` value.
 BEHAVIOURS: Registry[BehaviourModel] = Registry("behaviour")
 
@@ -411,10 +476,32 @@ class _Pedestrian:
         return float(np.clip((speed - v) / fleet.tick, -3.0, 1.5))
 
 
+class _Recorded:
+    """Follows its recorded trajectory (``behaviour.trajectory``), blind to everything."""
+
+    moves = True
+
+    def prepare(self, fleet: Fleet, rows: np.ndarray, view: WorldView) -> None:
+        return None
+
+    def acceleration(self, fleet: Fleet, i: int, since: float, view: WorldView, context: Any) -> float:
+        return 0.0
+
+    def setup(self, fleet: Fleet, rows: np.ndarray) -> RecordedTracks:
+        return RecordedTracks([fleet.specs[i].behaviour.trajectory for i in rows])
+
+    def references(self, state: RecordedTracks, time: float) -> tuple[np.ndarray, ...]:
+        return state.sample(time)
+
+    def presence(self, state: RecordedTracks, time: float) -> np.ndarray:
+        return state.present(time)
+
+
 BEHAVIOURS.register(BehaviourKind.SCRIPTED.value, _Scripted())
 BEHAVIOURS.register(BehaviourKind.IDM.value, _IntelligentDriver())
 BEHAVIOURS.register(BehaviourKind.PEDESTRIAN.value, _Pedestrian())
 BEHAVIOURS.register(BehaviourKind.PARKED.value, _Parked())
+BEHAVIOURS.register(BehaviourKind.RECORDED.value, _Recorded())
 
 
 def _leaders(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarray, np.ndarray]:

@@ -16,9 +16,10 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+import shapely
 
 from ethical_planner.environment import RoadEnvironment
-from ethical_planner.geometry import rectangle_corners
+from ethical_planner.geometry import rectangle_corners, rectangle_overlap
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
 from ethical_planner.validation import check_non_negative
@@ -26,8 +27,13 @@ from mujoco_world.agents.behaviour import Fleet, WorldView
 from mujoco_world.physics.control import ControlConfig, TrajectoryReference, brake_forces, tracking_forces
 from mujoco_world.physics.impact import ImpactMeasurement, ImpactRecorder
 from mujoco_world.physics.scene import BodyProxy, Scene
-from mujoco_world.scenario.road import build_road
-from mujoco_world.scenario.spec import RoadName, RouteSpec, Scenario
+from mujoco_world.scenario.road import StaticBox, build_road
+from mujoco_world.scenario.spec import BehaviourKind, Boundary, RoadKind, RoadName, RouteSpec, Scenario
+
+#: Where bodies that are not in the world (yet, or any more) wait [m]: far from every
+#: road and from each other, without contacts.
+PARK_ORIGIN_M = 1.0e5
+PARK_SPACING_M = 100.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,31 +121,78 @@ class World:
         self.control = control or ControlConfig()
         self.road = build_road(scenario.road)
         ego = scenario.ego
-        ego_route = self.road.route(RouteSpec(road=RoadName.MAIN, lane=ego.lane, turn=ego.turn))
+        if scenario.road.kind is RoadKind.MAP:
+            ego_route = self.road.main_line
+        else:
+            ego_route = self.road.route(RouteSpec(road=RoadName.MAIN, lane=ego.lane, turn=ego.turn))
         self.ego_path = ReferencePath.from_polyline(ego_route)
         self.goal_s = ego.goal_s if ego.goal_s is not None else self.ego_path.length - 20.0
+        self.goal_area = (
+            shapely.union_all([shapely.Polygon(ring) for ring in ego.goal_region])
+            if ego.goal_region
+            else None
+        )
         users = scenario.road_users
-        routes = [self.road.route(u.route) for u in users]
+        recorded = [u.behaviour.kind is BehaviourKind.RECORDED for u in users]
+        # A recorded body needs no route: it gets a short stand-in (shared by all of them).
+        routes = [
+            _STAND_IN_ROUTE if is_recorded else self.road.route(u.route)
+            for u, is_recorded in zip(users, recorded, strict=True)
+        ]
         self.fleet = Fleet(users, routes, scenario.road.speed_limit, behaviour_tick)
         proxies = [BodyProxy("ego", ego.type, ego.length, ego.width, ego.mass)]
-        proxies += [BodyProxy.of_type(u.name, u.type, *u.shape, u.mass) for u in users]
-        self.scene = Scene(proxies, self.road.static_boxes(), scenario.contact, timestep)
+        proxies += [
+            BodyProxy.of_type(u.name, u.type, *u.shape, u.mass, kerbs=False if is_recorded else None)
+            for u, is_recorded in zip(users, recorded, strict=True)
+        ]
+        statics = self.road.static_boxes() + tuple(
+            StaticBox((o.x, o.y), 0.5 * o.length, 0.5 * o.width, 0.75, o.yaw, Boundary.WALL)
+            for o in scenario.obstacles
+        )
+        self.scene = Scene(proxies, statics, scenario.contact, timestep)
         self.recorder = ImpactRecorder(self.scene)
         self.lengths = np.array([p.length for p in proxies])
         self.widths = np.array([p.width for p in proxies])
         self.types = tuple(p.type for p in proxies)
-        self.n = len(proxies)
-        x0, y0, th0, _, _ = self.ego_path.evaluate(np.array([ego.s0]))
-        ux, uy, uyaw, uv = self.fleet.initial_poses()
+        if ego.pose is not None:
+            x0, y0, th0 = (np.array([value]) for value in ego.pose)
+            s_start = float(self.ego_path.to_frenet(x0, y0)[0][0])
+        else:
+            x0, y0, th0, _, _ = self.ego_path.evaluate(np.array([ego.s0]))
+            s_start = ego.s0
+        ux, uy, uyaw, _ = self.fleet.initial_poses()
+        user_velocity = self.fleet.initial_velocities()
         x = np.concatenate([x0, ux])
         y = np.concatenate([y0, uy])
         yaw = np.concatenate([th0, uyaw])
-        v = np.concatenate([[ego.speed], uv])
-        self.scene.set_states(x, y, yaw, v * np.cos(yaw), v * np.sin(yaw))
+        vx = np.concatenate([[ego.speed * math.cos(th0[0])], user_velocity[:, 0]])
+        vy = np.concatenate([[ego.speed * math.sin(th0[0])], user_velocity[:, 1]])
+        self.n = len(proxies)
+        #: (n,) bool: which bodies are in the world (recorded road users enter and leave).
+        self.present = np.ones(self.n, dtype=bool)
+        self.present[1:] = self.fleet.presence(0.0)
+        self._park = np.column_stack(
+            [PARK_ORIGIN_M + PARK_SPACING_M * np.arange(self.n), np.full(self.n, PARK_ORIGIN_M)]
+        )
+        absent = ~self.present
+        x[absent], y[absent] = self._park[absent, 0], self._park[absent, 1]
+        vx[absent], vy[absent] = 0.0, 0.0
+        self.scene.set_states(x, y, yaw, vx, vy)
+        if absent.any():
+            self.scene.set_contacts(np.flatnonzero(absent), False)
         self._check_no_overlap()
-        # The ego keeps its lane at constant speed until the first plan arrives.
-        s_grid = ego.s0 + np.arange(0.0, 3.01, 0.1) * ego.speed
+        #: Presence events, (time [s], entity, "enter" | "leave" | "enter_blocked").
+        self.presence_events: list[tuple[float, int, str]] = []
+        # Bodies whose entry is held back because they would appear inside another body.
+        self._blocked = np.zeros(self.n, dtype=bool)
+        # The ego keeps its heading and speed until the first plan arrives (on its route).
+        s_grid = s_start + np.arange(0.0, 3.01, 0.1) * ego.speed
         px, py, pth, pk, _ = self.ego_path.evaluate(s_grid)
+        if ego.pose is not None:
+            t_grid = np.arange(0.0, 3.01, 0.1)
+            px = x0[0] + t_grid * ego.speed * math.cos(th0[0])
+            py = y0[0] + t_grid * ego.speed * math.sin(th0[0])
+            pth, pk = np.full_like(t_grid, th0[0]), np.zeros_like(t_grid)
         n_grid = len(s_grid)
         self.ego_plan = TrajectoryReference(
             0.0,
@@ -156,6 +209,10 @@ class World:
         self._track_sq = 0.0
         self._track_max = 0.0
         self._track_n = 0
+        # Road users' distance to their references before their first contact.
+        self._user_track_sq = np.zeros(self.n)
+        self._user_track_max = np.zeros(self.n)
+        self._user_track_n = np.zeros(self.n, dtype=int)
         self._dist_buf = np.zeros(6)
         # Geoms of road users, for distance queries from the ego.
         self._other_geoms = self.scene.geom_ids[1:]
@@ -220,12 +277,16 @@ class World:
     def environment(self) -> RoadEnvironment:
         """The road as the planner sees it: the ego route, lanes, drivable area."""
         spec = self.scenario.road
-        lane = self.scenario.ego.lane
-        offsets = tuple((k - lane) * spec.lane_width for k in range(spec.lanes))
+        if spec.map is not None:
+            width, offsets = spec.map.lane_width, spec.map.lane_offsets
+        else:
+            lane = self.scenario.ego.lane
+            width = spec.lane_width
+            offsets = tuple((k - lane) * spec.lane_width for k in range(spec.lanes))
         return RoadEnvironment(
             reference_path=self.ego_path,
             drivable_area=self.road.drivable_area,
-            lane_width=spec.lane_width,
+            lane_width=width,
             lane_offsets=offsets,
             speed_limit=spec.speed_limit,
         )
@@ -262,6 +323,29 @@ class World:
         """Arc length of the ego along its route [m]."""
         s, _ = self.ego_path.to_frenet(self.scene.qpos[0, 0], self.scene.qpos[0, 1])
         return float(s)
+
+    def goal_reached(self) -> bool:
+        """True once the ego has reached its goal.
+
+        The goal is, in this order: its goal region (the ego's centre inside it), a
+        goal of time only (the run has lasted ``ego.goal_time``), or its arc length
+        ``goal_s`` along the route.
+        """
+        ego = self.scenario.ego
+        if self.goal_area is not None:
+            return bool(self.goal_area.covers(shapely.Point(self.scene.qpos[0, 0], self.scene.qpos[0, 1])))
+        if ego.goal_time is not None:
+            return self.time >= ego.goal_time - 1e-9
+        return self.ego_progress() >= self.goal_s
+
+    def goal_description(self) -> str:
+        """What reaching the goal means here (for a run's reason)."""
+        ego = self.scenario.ego
+        if self.goal_area is not None:
+            return "ego reached its goal region"
+        if ego.goal_time is not None:
+            return f"ego drove until its goal time {ego.goal_time:g} s without a collision"
+        return f"ego reached s = {self.goal_s:.1f} m on its route"
 
     def view(self) -> WorldView:
         """True states of all bodies for the behaviours."""
@@ -336,7 +420,7 @@ class World:
                 accel[1:] += rng.normal(0.0, noise.acceleration, self.n - 1)
                 yaw_rate[1:] += rng.normal(0.0, noise.yaw_rate, self.n - 1)
         t = self.time
-        visible = self.visible()
+        visible = self.visible() & self.present
         a_plan = float(self.ego_plan.sample(t)[2] @ np.array([math.cos(yaw[0]), math.sin(yaw[0])]))
         ego_state = KinematicState(
             float(x[0]), float(y[0]), float(yaw[0]), float(v[0]), a_plan, float(qvel[0, 2])
@@ -420,6 +504,14 @@ class World:
         if fleet.k:
             p, v, a, yaw, rate = fleet.references(t)
             p_ref[1:], v_ref[1:], a_ref[1:], yaw_ref[1:], rate_ref[1:] = p, v, a, yaw, rate
+            self._update_presence(t)
+            following = self.present & ~self.crashed & ~self._blocked
+            following[0] = False
+            if following.any():
+                err = np.hypot(*(scene.qpos[following, :2] - p_ref[following]).T)
+                self._user_track_sq[following] += err * err
+                self._user_track_n[following] += 1
+                np.maximum.at(self._user_track_max, np.flatnonzero(following), err)
         if not self.crashed[0]:
             p, v, a, yaw, rate = self.ego_plan.sample(t)
             err = math.hypot(scene.qpos[0, 0] - p[0], scene.qpos[0, 1] - p[1])
@@ -445,7 +537,75 @@ class World:
             # No braking during a crash pulse: it would contaminate the measured delta-v.
             brake[self.recorder.in_pulse[rows]] = 0.0
             ctrl[rows] = brake
+        if not self.present.all():
+            ctrl[~self.present] = 0.0
         scene.ctrl[:] = ctrl
+
+    def _update_presence(self, t: float) -> None:
+        """Let recorded road users enter and leave the world at ``t`` [s].
+
+        A body enters at its reference state (position, heading, velocity) with its
+        contacts on, unless it would appear inside another body: then it waits as a
+        ghost (no contacts, following its reference) until it is clear, and the
+        presence events say so. A body leaves by losing its contacts and being parked
+        far away; a crashed body stays (a wreck does not vanish).
+        """
+        want = np.ones(self.n, dtype=bool)
+        want[1:] = self.fleet.presence(t)
+        want |= self.crashed
+        want[0] = self.present[0]
+        scene = self.scene
+        leave = self.present & ~want
+        if leave.any():
+            rows = np.flatnonzero(leave)
+            scene.set_contacts(rows, False)
+            scene.qpos[rows, :2] = self._park[rows]
+            scene.qvel[rows] = 0.0
+            self.present[rows] = False
+            self._blocked[rows] = False
+            self.presence_events += [(t, int(i), "leave") for i in rows]
+        enter = ~self.present & want
+        if enter.any():
+            rows = np.flatnonzero(enter)
+            scene.qpos[rows, :2] = self._p_ref[rows]
+            scene.qpos[rows, 2] = self._yaw_ref[rows]
+            scene.qvel[rows, :2] = self._v_ref[rows]
+            scene.qvel[rows, 2] = self._rate_ref[rows]
+            self.present[rows] = True
+            self._blocked[rows] = True
+            self.presence_events += [(t, int(i), "enter") for i in rows]
+            held = rows[~self._release_blocked(rows)]
+            self.presence_events += [(t, int(i), "enter_blocked") for i in held]
+        if self._blocked.any():
+            self._release_blocked(np.flatnonzero(self._blocked))
+
+    def _release_blocked(self, rows: np.ndarray) -> np.ndarray:
+        """Turn on the contacts of entering bodies ``rows`` that overlap no other body.
+
+        Returns:
+            (len(rows),) bool: which were released.
+        """
+        qpos = self.scene.qpos
+        others = np.flatnonzero(self.present & ~self._blocked)
+        clear = np.ones(rows.size, dtype=bool)
+        if others.size:
+            depth = rectangle_overlap(
+                qpos[rows, 0, None],
+                qpos[rows, 1, None],
+                qpos[rows, 2, None],
+                self.lengths[rows, None],
+                self.widths[rows, None],
+                qpos[others, 0],
+                qpos[others, 1],
+                qpos[others, 2],
+                self.lengths[others],
+                self.widths[others],
+            )
+            clear = ~(depth > 0.0).any(axis=1)
+        if clear.any():
+            self.scene.set_contacts(rows[clear], True)
+            self._blocked[rows[clear]] = False
+        return clear
 
     def step(self) -> list[ImpactMeasurement]:
         """One physics step: behaviours, controllers, ``mj_step``, impact measurement.
@@ -502,13 +662,30 @@ class World:
             return 0.0, 0.0
         return math.sqrt(self._track_sq / self._track_n), self._track_max
 
+    def road_user_tracking(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each road user's distance to its reference while in the world, before its first contact.
+
+        Returns:
+            (rms [m], max [m], samples), each (n,) with entity 0 (the ego) zero; rms is
+            nan for a body never sampled.
+        """
+        n = self._user_track_n
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rms = np.where(n > 0, np.sqrt(self._user_track_sq / np.maximum(n, 1)), np.nan)
+        rms[0] = 0.0
+        return rms, self._user_track_max.copy(), n.copy()
+
     def ego_distances(self, distmax: float = 50.0) -> np.ndarray:
-        """(n - 1,) distances [m] from the ego's geom to every road user's (capped at distmax)."""
+        """(n - 1,) distances [m] from the ego's geom to every road user's (capped at distmax).
+
+        Road users not in the world are at ``distmax``.
+        """
         scene = self.scene
         ego_geom = int(scene.geom_ids[0])
-        out = np.empty(len(self._other_geoms))
+        out = np.full(len(self._other_geoms), float(distmax))
         for k, g in enumerate(self._other_geoms):
-            out[k] = mujoco.mj_geomDistance(scene.model, scene.data, ego_geom, int(g), distmax, None)
+            if self.present[k + 1]:
+                out[k] = mujoco.mj_geomDistance(scene.model, scene.data, ego_geom, int(g), distmax, None)
         return out
 
     def diverged(self, max_penetration: float) -> str | None:
@@ -527,6 +704,10 @@ class World:
         if self.recorder.max_penetration > max_penetration:
             return f"penetration {self.recorder.max_penetration:.3f} m exceeds the bound {max_penetration} m"
         return None
+
+
+#: The route a recorded road user is given (it follows its recording, not a route).
+_STAND_IN_ROUTE = np.array([[0.0, 0.0], [10.0, 0.0]])
 
 
 def _occluded(

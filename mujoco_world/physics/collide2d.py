@@ -247,6 +247,10 @@ class Collider:
         self.time_to_touch = math.inf
         n = len(self.half)
         self.pair_i, self.pair_j = np.triu_indices(n, 1)
+        #: (n,) bodies that take part in contacts (a recorded road user out of the world does not).
+        self.enabled = np.ones(n, dtype=bool)
+        #: (pairs,) body pairs that may touch (``exclude`` removes some).
+        self.pair_allowed = np.ones(self.pair_i.size, dtype=bool)
         if self.statics:
             s = self.statics
             self.s_center = np.array([[b.x, b.y] for b in s])
@@ -256,6 +260,14 @@ class Collider:
             self.s_pose = np.array([[b.x, b.y, b.yaw] for b in s])
             kerb = np.array([b.kerb for b in s])
             self.s_allowed = ~kerb[None, :] | self.motorised[:, None]  # (n, s)
+
+    def exclude(self, pairs: Sequence[tuple[int, int]]) -> None:
+        """Bodies of each pair (entity indices) never touch each other."""
+        n = len(self.half)
+        for a, b in pairs:
+            i, j = min(a, b), max(a, b)
+            k = i * n - i * (i + 1) // 2 + (j - i - 1)  # index of (i, j) in triu_indices(n, 1)
+            self.pair_allowed[k] = False
 
     def contacts(
         self,
@@ -285,6 +297,7 @@ class Collider:
         if n > 1:
             i, j = self.pair_i, self.pair_j
             gap = np.hypot(qpos[j, 0] - qpos[i, 0], qpos[j, 1] - qpos[i, 1]) - self.radius[i] - self.radius[j]
+            gap = np.where(self.pair_allowed & self.enabled[i] & self.enabled[j], gap, math.inf)
             margin = base + reach[i] + reach[j]
             near = np.flatnonzero(gap < margin)
             if near.size:
@@ -324,7 +337,8 @@ class Collider:
         u = np.abs(self.s_cos * rx + self.s_sin * ry) - self.s_half[:, 0]
         v = np.abs(-self.s_sin * rx + self.s_cos * ry) - self.s_half[:, 1]
         outside = np.hypot(np.maximum(u, 0.0), np.maximum(v, 0.0)) + np.minimum(np.maximum(u, v), 0.0)
-        gap = np.where(self.s_allowed, outside - self.radius[:, None], math.inf)
+        allowed = self.s_allowed & self.enabled[:, None]
+        gap = np.where(allowed, outside - self.radius[:, None], math.inf)
         body, box = np.nonzero(gap < margin[:, None])
         if body.size:
             pose, half = self.s_pose[box], self.s_half[box]

@@ -46,7 +46,7 @@ import numpy as np
 import shapely
 
 from ethical_planner.impulse import RestitutionLaw
-from ethical_planner.road_users import MOTORISED_TYPES, UNPROTECTED_TYPES, RoadUserType
+from ethical_planner.road_users import UNPROTECTED_TYPES, RoadUserType
 from mujoco_world.physics.collide2d import Box2D, Collider, Contacts
 from mujoco_world.scenario.spec import FORCE_RESTITUTION as _FORCE_RESTITUTION
 from mujoco_world.scenario.spec import SOFT_RESTITUTION_TABLE as _SOFT_TABLE
@@ -370,12 +370,15 @@ class ContactDynamics:
         self.collider = Collider(
             [(0.5 * b.length, 0.5 * b.width) for b in bodies],
             [b.is_round for b in bodies],
-            [b.type in MOTORISED_TYPES for b in bodies],
+            [bool(b.kerbs) for b in bodies],
             [
                 Box2D(*box.center, box.yaw, box.half_length, box.half_width, box.kind is Boundary.KERB)
                 for box in scene.static_boxes
             ],
         )
+
+        index = {name: k for k, name in enumerate(scene.names)}
+        self.collider.exclude([(index[a], index[b]) for a, b in contact.exclude if a in index and b in index])
 
     def reset(self) -> None:
         """Forget every pair state (after ``Scene.reset``)."""

@@ -69,6 +69,8 @@ class BodyProxy:
         length: footprint length [m] (pedestrians: diameter is the smaller side).
         width: footprint width [m].
         mass: [kg].
+        kerbs: whether kerbs stop it; None: motor vehicles only (a body that follows a
+            recording ignores kerbs: the recording already says where it went).
     """
 
     name: str
@@ -76,6 +78,7 @@ class BodyProxy:
     length: float
     width: float
     mass: float
+    kerbs: bool | None = None
 
     def __post_init__(self) -> None:
         check(
@@ -84,6 +87,8 @@ class BodyProxy:
         )
         object.__setattr__(self, "type", RoadUserType.parse(self.type))
         check_positive("BodyProxy", length=self.length, width=self.width, mass=self.mass)
+        if self.kerbs is None:
+            object.__setattr__(self, "kerbs", self.type in MOTORISED_TYPES)
 
     @classmethod
     def of_type(
@@ -93,6 +98,7 @@ class BodyProxy:
         length: float | None = None,
         width: float | None = None,
         mass: float | None = None,
+        kerbs: bool | None = None,
     ) -> BodyProxy:
         """A proxy with the type's default shape and SPEC mass unless given."""
         kind = RoadUserType.parse(kind)
@@ -100,7 +106,7 @@ class BodyProxy:
         length = shape.length if length is None else length
         width = shape.width if width is None else width
         mass = mass_of(kind, length, width) if mass is None else mass
-        return cls(name, kind, float(length), float(width), float(mass))
+        return cls(name, kind, float(length), float(width), float(mass), kerbs)
 
     @property
     def height(self) -> float:
@@ -163,7 +169,7 @@ def scene_xml(
     for body in bodies:
         name = body.name
         half_h = 0.5 * body.height
-        affinity = _BODY_BIT | _WALL_BIT | (_KERB_BIT if body.type in MOTORISED_TYPES else 0)
+        affinity = _BODY_BIT | _WALL_BIT | (_KERB_BIT if body.kerbs else 0)
         contype = _BODY_BIT
         if params.forces:
             contype = affinity = 0
@@ -183,8 +189,9 @@ def scene_xml(
         ]
     lines.append("  </worldbody>")
     pairs = [] if params.forces else _restitution_pairs(bodies, contact)
-    if pairs:
-        lines += ["  <contact>", *pairs, "  </contact>"]
+    excludes = [f"    <exclude body1={quoteattr(a)} body2={quoteattr(b)}/>" for a, b in contact.exclude]
+    if pairs or excludes:
+        lines += ["  <contact>", *pairs, *excludes, "  </contact>"]
     lines.append("  <actuator>")
     for body in bodies:
         for axis in ("x", "y", "yaw"):
@@ -205,10 +212,11 @@ def _restitution_pairs(bodies: Sequence[BodyProxy], contact: ContactSpec) -> lis
     }
     friction = _fmt(contact.friction, contact.friction, 0.005, 0.0001, 0.0001)
     pairs = []
+    excluded = {frozenset(pair) for pair in contact.exclude}
     for i, a in enumerate(bodies):
         for b in bodies[i + 1 :]:
             dampratio = table.get(frozenset((a.type, b.type)))
-            if dampratio is None:
+            if dampratio is None or frozenset((a.name, b.name)) in excluded:
                 continue
             pairs.append(
                 f'    <pair geom1="{a.name}_geom" geom2="{b.name}_geom" condim="3" '
@@ -302,6 +310,8 @@ class Scene:
         self.names = tuple(names)
         self.static_kind = static_boxes[0].kind.value if static_boxes else "static"
         self.static_boxes = tuple(static_boxes)
+        self._contype = m.geom_contype[self.geom_ids].copy()
+        self._conaffinity = m.geom_conaffinity[self.geom_ids].copy()
         self.dynamics = ContactDynamics(self)
 
     @property
@@ -349,6 +359,22 @@ class Scene:
         new.qvel = new.data.qvel.reshape(new.n, 3)
         new.ctrl = new.data.ctrl.reshape(new.n, 3)
         return new
+
+    def set_contacts(self, rows: np.ndarray, enabled: bool) -> None:
+        """Let bodies ``rows`` (entity indices) take part in contacts, or not.
+
+        A body without contacts passes through everything (a road user that has not
+        entered the world yet, or has left it): in the soft mode through MuJoCo's
+        contact bits (explicit ``<pair>`` contacts are not filtered), in the force modes
+        through the collider. Bodies out of the world are also parked far apart. (The soft
+        mode changes the shared ``model``: its forks share these bits.)
+        """
+        geoms = self.geom_ids[rows]
+        m = self.model
+        m.geom_contype[geoms] = self._contype[rows] if enabled else 0
+        m.geom_conaffinity[geoms] = self._conaffinity[rows] if enabled else 0
+        self.dynamics.collider.enabled[rows] = enabled
+        self.dynamics.invalidate()
 
     @property
     def time(self) -> float:

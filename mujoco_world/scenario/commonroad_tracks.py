@@ -300,6 +300,24 @@ def check_step(
     return StepCheck(declared_dt, ratio, len(values), dt, True, msg)
 
 
+def open_commonroad(path: str | Path) -> tuple[object, object]:
+    """Parse a CommonRoad file: (commonroad ``Scenario``, ``PlanningProblemSet``).
+
+    Raises:
+        UnusableScenarioError: no such file, or the parser cannot read it (its message
+            named).
+    """
+    from commonroad.common.file_reader import CommonRoadFileReader
+
+    path = Path(path)
+    if not path.is_file():
+        raise UnusableScenarioError(f"{path}: no such file")
+    try:
+        return CommonRoadFileReader(str(path)).open()
+    except Exception as error:  # noqa: BLE001 - the parser raises many kinds
+        raise UnusableScenarioError(f"{path}: not a readable CommonRoad file ({error})") from error
+
+
 def read_tracks(path: str | Path, step: str = "velocity") -> ScenarioTracks:
     """Read every recorded road-user trajectory of a CommonRoad file.
 
@@ -318,19 +336,33 @@ def read_tracks(path: str | Path, step: str = "velocity") -> ScenarioTracks:
     """
     if step not in STEP_POLICIES:
         raise ValueError(f"step must be one of {', '.join(STEP_POLICIES)}, got {step!r}")
-    from commonroad.common.file_reader import CommonRoadFileReader
+    scenario, _ = open_commonroad(path)
+    return scenario_tracks(scenario, path, step)
 
+
+def scenario_tracks(
+    scenario: object, path: str | Path, step: str = "velocity", allow_empty: bool = False
+) -> ScenarioTracks:
+    """The recorded road-user trajectories of a parsed CommonRoad scenario (see ``read_tracks``).
+
+    Args:
+        scenario: a commonroad-io ``Scenario`` (from ``open_commonroad``).
+        path: the file it came from (for messages and ``ScenarioTracks.path``).
+        step: step policy, as in ``read_tracks``.
+        allow_empty: return no tracks (declared step kept) instead of raising when the
+            scenario has no usable recorded trajectory.
+
+    Raises:
+        ValueError: an unknown ``step`` policy.
+        UnusableScenarioError: no usable trajectory and not ``allow_empty``.
+    """
+    if step not in STEP_POLICIES:
+        raise ValueError(f"step must be one of {', '.join(STEP_POLICIES)}, got {step!r}")
     path = Path(path)
-    if not path.is_file():
-        raise UnusableScenarioError(f"{path}: no such file")
-    try:
-        scenario, _ = CommonRoadFileReader(str(path)).open()
-    except Exception as error:  # noqa: BLE001 - the parser raises many kinds
-        raise UnusableScenarioError(f"{path}: not a readable CommonRoad file ({error})") from error
     declared = float(scenario.dt)
     scenario_id = str(scenario.scenario_id)
     obstacles = list(scenario.dynamic_obstacles)
-    if not obstacles:
+    if not obstacles and not allow_empty:
         raise UnusableScenarioError(f"{path}: no dynamic obstacles, so no recorded trajectories")
     tracks: list[Track] = []
     skipped: list[tuple[int, str]] = []
@@ -343,7 +375,7 @@ def read_tracks(path: str | Path, step: str = "velocity") -> ScenarioTracks:
             skipped.append((int(obstacle.obstacle_id), reason))
         else:
             tracks.append(track)
-    if not tracks:
+    if not tracks and not allow_empty:
         reasons = sorted({r for _, r in skipped})
         raise UnusableScenarioError(
             f"{path}: none of its {len(obstacles)} obstacles has a recorded trajectory ({'; '.join(reasons)})"

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from shapely.geometry import LineString, MultiLineString, Polygon, box
+from shapely.geometry import LineString, MultiLineString, MultiPolygon, Polygon, box
 
 from ethical_planner.validation import check
 from mujoco_world.scenario.spec import Boundary, RoadKind, RoadName, RoadSpec, RouteSpec, Turn
@@ -80,14 +80,14 @@ class RoadGeometry:
         spec: the road description.
         main_line: main road reference line [m], shape (n, 2).
         cross_line: cross road reference line [m], shape (m, 2), or None.
-        drivable_area: polygon [m].
+        drivable_area: polygon [m] (a map road's may be a MultiPolygon).
         boundaries: polylines [m] lined with walls or kerbs, each shape (k, 2).
     """
 
     spec: RoadSpec
     main_line: np.ndarray
     cross_line: np.ndarray | None
-    drivable_area: Polygon
+    drivable_area: Polygon | MultiPolygon
     boundaries: tuple[np.ndarray, ...]
 
     # ------------------------------------------------------------------ lanes
@@ -108,6 +108,10 @@ class RoadGeometry:
         """Polyline of a route in its direction of travel [m], shape (n, 2)."""
         if spec.road is RoadName.WAYPOINTS:
             return _dedupe(np.asarray(spec.waypoints, dtype=float))
+        if self.spec.kind is RoadKind.MAP:
+            # A map road's main route is its reference path, shifted by the offset.
+            line = offset_polyline(self.main_line, spec.direction * spec.offset)
+            return line if spec.direction > 0 else line[::-1].copy()
         d = self.lane_offset(spec.lane, spec.direction) + spec.direction * spec.offset
         if spec.turn is Turn.STRAIGHT or self.spec.kind is not RoadKind.INTERSECTION:
             line = offset_polyline(self._line(spec.road), d)
@@ -213,8 +217,25 @@ def _main_line(spec: RoadSpec) -> np.ndarray:
     return _dedupe(np.concatenate(points))
 
 
+def _map_road(spec: RoadSpec) -> RoadGeometry:
+    """The geometry of a map road: the union of its area polygons, its own boundaries."""
+    road_map = spec.map
+    polygons = [shapely.make_valid(Polygon(ring)) for ring in road_map.area]
+    area = shapely.unary_union([p for p in polygons if not p.is_empty and p.area > 0])
+    if not isinstance(area, Polygon | MultiPolygon):
+        parts = [g for g in getattr(area, "geoms", []) if isinstance(g, Polygon | MultiPolygon)]
+        area = shapely.unary_union(parts)
+    check(not area.is_empty, "road.map.area has no area")
+    main = _dedupe(np.asarray(road_map.reference_path, dtype=float))
+    check(len(main) >= 2, "road.map.reference_path needs two distinct points")
+    boundaries = tuple(_dedupe(np.asarray(line, dtype=float)) for line in road_map.boundaries)
+    return RoadGeometry(spec, main, None, area, tuple(b for b in boundaries if len(b) >= 2))
+
+
 def build_road(spec: RoadSpec) -> RoadGeometry:
     """Build the road geometry of ``spec``."""
+    if spec.kind is RoadKind.MAP:
+        return _map_road(spec)
     main = _main_line(spec)
     right = spec.half_width + spec.parking_width + spec.shoulder
     left = spec.half_width + spec.shoulder

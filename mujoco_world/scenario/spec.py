@@ -22,6 +22,7 @@ from ethical_planner.impulse import RestitutionLaw
 from ethical_planner.records import errors_in, from_mapping, read_toml
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, RoadUserType
 from ethical_planner.validation import check, check_finite, check_non_negative, check_positive, parse_enum
+from mujoco_world.scenario.imported import MapSpec, ObstacleSpec, Points, RecordedTrajectory, points
 
 
 def knots(owner: str, name: str, value: Any) -> tuple[tuple[float, float], ...]:
@@ -112,6 +113,7 @@ class RoadKind(StrEnum):
     STRAIGHT = "straight"
     CURVED = "curved"
     INTERSECTION = "intersection"
+    MAP = "map"
 
 
 class Boundary(StrEnum):
@@ -145,12 +147,15 @@ class BehaviourKind(StrEnum):
     idm: car following (intelligent driver model) with braking for obstacles ahead.
     pedestrian: walks to ``crossing.wait_at``, waits for a gap, then crosses.
     parked: holds its start pose with its brakes.
+    recorded: follows ``trajectory`` (a recording), blind to everything; it exists in
+        the world only while its recording lasts.
     """
 
     SCRIPTED = "scripted"
     IDM = "idm"
     PEDESTRIAN = "pedestrian"
     PARKED = "parked"
+    RECORDED = "recorded"
 
 
 @dataclass(frozen=True, slots=True)
@@ -158,8 +163,10 @@ class RoadSpec:
     """Road geometry.
 
     Attributes:
-        kind: straight, curved (lead-in, arc, straight remainder) or a four-way
-            intersection of the main road (along x) and a cross road (along y).
+        kind: straight, curved (lead-in, arc, straight remainder), a four-way
+            intersection of the main road (along x) and a cross road (along y), or a
+            map (``map`` gives the geometry; ``length`` is the length of its reference
+            path, the lane and curve fields are not used).
         length: centre-line length of the main road [m] (and of the cross road).
         lanes: number of lanes of each road.
         lane_width: [m].
@@ -172,6 +179,7 @@ class RoadSpec:
         curve_angle: turning angle of the arc [deg], positive to the left (curved only).
         lead_in: straight before the arc [m] (curved only).
         corner_radius: kerb radius at the intersection corners [m].
+        map: the road's geometry (``kind = "map"`` only).
     """
 
     kind: RoadKind = RoadKind.STRAIGHT
@@ -186,9 +194,14 @@ class RoadSpec:
     curve_angle: float = 60.0
     lead_in: float = 40.0
     corner_radius: float = 8.0
+    map: MapSpec | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kind", parse_enum(RoadKind, self.kind, "road kind", "road.kind"))
+        check(
+            (self.map is not None) == (self.kind is RoadKind.MAP),
+            "road.map is required with road.kind = 'map' and allowed only with it",
+        )
         object.__setattr__(self, "boundary", parse_enum(Boundary, self.boundary, "boundary", "road.boundary"))
         check_positive(
             "road",
@@ -375,6 +388,7 @@ class BehaviourSpec:
             activation, smooth (cubic smoothstep) between.
         idm: car-following parameters (kind idm; defaults if omitted).
         crossing: gap acceptance (kind pedestrian; defaults if omitted).
+        trajectory: the recording to follow (kind recorded only, required there).
     """
 
     kind: BehaviourKind = BehaviourKind.SCRIPTED
@@ -385,9 +399,14 @@ class BehaviourSpec:
     lateral: tuple[tuple[float, float], ...] = ()
     idm: IdmSpec | None = None
     crossing: CrossingSpec | None = None
+    trajectory: RecordedTrajectory | None = None
 
     def __post_init__(self) -> None:
         kind = parse_enum(BehaviourKind, self.kind, "behaviour kind", "behaviour.kind")
+        check(
+            (self.trajectory is not None) == (kind is BehaviourKind.RECORDED),
+            "behaviour.trajectory is required with kind 'recorded' and allowed only with it",
+        )
         object.__setattr__(self, "kind", kind)
         check_non_negative("behaviour", speed=self.speed, start_time=self.start_time)
         check_positive("behaviour", trigger_distance=self.trigger_distance)
@@ -416,6 +435,16 @@ class BehaviourSpec:
             check(
                 self.speed == 0 and not self.speed_profile and not self.lateral,
                 "behaviour of kind 'parked' takes no speed, speed_profile or lateral",
+            )
+        if kind is BehaviourKind.RECORDED:
+            check(
+                self.speed == 0
+                and self.start_time == 0
+                and self.trigger_distance is None
+                and not self.speed_profile
+                and not self.lateral,
+                "behaviour of kind 'recorded' takes its motion from its trajectory only "
+                "(no speed, start_time, trigger_distance, speed_profile or lateral)",
             )
 
 
@@ -509,6 +538,12 @@ class EgoSpec:
         goal_s: arc length along the route where the goal is reached [m]; None is
             20 m before the route's end.
         desired_speed: [m/s]; None uses the road's speed limit.
+        pose: start pose (x [m], y [m], yaw [rad]) in the world; None starts on the
+            route at ``s0`` (a map road's route is ``road.map.reference_path``).
+        goal_region: polygons [m]; the goal is reached when the ego's centre is inside
+            one of them (instead of at ``goal_s``).
+        goal_time: a goal of time only: reached when the run has lasted this long [s]
+            (not with ``goal_region``).
     """
 
     type: RoadUserType = RoadUserType.CAR
@@ -521,9 +556,29 @@ class EgoSpec:
     turn: Turn = Turn.STRAIGHT
     goal_s: float | None = None
     desired_speed: float | None = None
+    pose: tuple[float, float, float] | None = None
+    goal_region: tuple[Points, ...] = ()
+    goal_time: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "type", parse_enum(RoadUserType, self.type, "road-user type", "ego.type"))
+        if self.pose is not None:
+            try:
+                x, y, yaw = (float(v) for v in self.pose)
+            except (TypeError, ValueError):
+                raise ValueError(f"ego.pose must be [x, y, yaw], got {self.pose!r}") from None
+            check_finite("ego", pose_x=x, pose_y=y, pose_yaw=yaw)
+            object.__setattr__(self, "pose", (x, y, yaw))
+        object.__setattr__(
+            self,
+            "goal_region",
+            tuple(points(f"ego.goal_region[{i}]", ring, 3) for i, ring in enumerate(self.goal_region)),
+        )
+        check_positive("ego", goal_time=self.goal_time)
+        check(
+            self.goal_time is None or not self.goal_region,
+            "ego.goal_time (a goal of time only) is not allowed with ego.goal_region",
+        )
         object.__setattr__(self, "turn", parse_enum(Turn, self.turn, "turn", "ego.turn"))
         check_positive("ego", length=self.length, width=self.width, mass=self.mass)
         check_non_negative("ego", speed=self.speed, desired_speed=self.desired_speed)
@@ -637,6 +692,8 @@ class ContactSpec:
         dampratio: ``soft`` mode only: solref damping ratio; >= 4 gives e ~ 0.01. In soft
             mode ``restitution`` entries give a constant e per pair (their ``e`` or
             ``e_high``) and the law is not used.
+        exclude: pairs of road-user names that never touch (e.g. recorded bodies whose
+            recorded footprints overlap).
     """
 
     mode: ContactMode = ContactMode.RIGID
@@ -646,8 +703,17 @@ class ContactSpec:
     timeconst: float = 0.05
     dampratio: float = 4.0
 
+    exclude: tuple[tuple[str, str], ...] = ()
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "mode", parse_enum(ContactMode, self.mode, "contact mode", "contact.mode"))
+        try:
+            pairs = tuple((str(a), str(b)) for a, b in self.exclude)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"contact.exclude must be a list of [name, name] pairs, got {self.exclude!r}"
+            ) from None
+        object.__setattr__(self, "exclude", pairs)
         check_positive("contact", timeconst=self.timeconst, dampratio=self.dampratio)
         check_non_negative("contact", friction=self.friction)
         check_plausible("contact", self)
@@ -718,6 +784,9 @@ class Scenario:
         duration: time limit [s].
         contact: contact model.
         sensor: what the ego perceives (occlusion, range).
+        obstacles: fixed obstacles (bodies that never move).
+        notes: what made the scenario (an importer's decisions and findings), for
+            summaries and reports.
     """
 
     name: str
@@ -728,6 +797,8 @@ class Scenario:
     duration: float = 20.0
     contact: ContactSpec = field(default_factory=ContactSpec)
     sensor: SensorSpec = field(default_factory=SensorSpec)
+    obstacles: tuple[ObstacleSpec, ...] = ()
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         check(
@@ -758,6 +829,21 @@ class Scenario:
         duplicates = sorted({n for n in names if names.count(n) > 1})
         check(not duplicates, f"road_users: duplicate names {duplicates}")
         check("ego" not in names, "road_users: the name 'ego' is reserved")
+        known = set(names)
+        for a, b in self.contact.exclude:
+            check(
+                a in known and b in known and a != b,
+                f"contact.exclude: {a!r} and {b!r} must be two different road users of the scenario",
+            )
+        object.__setattr__(self, "obstacles", tuple(self.obstacles))
+        object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
+        if self.road.kind is RoadKind.MAP:
+            for i, user in enumerate(self.road_users):
+                check(
+                    user.route.road is RoadName.WAYPOINTS or user.route.lane == 0,
+                    f"road_users[{i}] ({user.name}).route.lane must be 0 on a map road "
+                    "(its main route is the reference path shifted by route.offset)",
+                )
         lanes = self.road.lanes
         check(self.ego.lane < lanes, f"ego.lane must be < road.lanes ({lanes}), got {self.ego.lane}")
         if self.road.kind is not RoadKind.INTERSECTION:
