@@ -111,12 +111,8 @@ class RecordedTracks:
         m0, m1 = self.velocity[rows, i], self.velocity[rows, i + 1]
         u = f[:, None]
         u2, u3 = u * u, u * u * u
-        p = (
-            (2 * u3 - 3 * u2 + 1) * p0
-            + (u3 - 2 * u2 + u) * h * m0
-            + (-2 * u3 + 3 * u2) * p1
-            + (u3 - u2) * h * m1
-        )
+        p = (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * h * m0
+        p = p + (-2 * u3 + 3 * u2) * p1 + (u3 - u2) * h * m1
         v = (6 * u2 - 6 * u) * (p0 - p1) / h + (3 * u2 - 4 * u + 1) * m0 + (3 * u2 - 2 * u) * m1
         a = (12 * u - 6) * (p0 - p1) / (h * h) + ((6 * u - 4) * m0 + (6 * u - 2) * m1) / h
         y0, y1 = self.yaw[rows, i], self.yaw[rows, i + 1]

@@ -127,11 +127,8 @@ class World:
             ego_route = self.road.route(RouteSpec(road=RoadName.MAIN, lane=ego.lane, turn=ego.turn))
         self.ego_path = ReferencePath.from_polyline(ego_route)
         self.goal_s = ego.goal_s if ego.goal_s is not None else self.ego_path.length - 20.0
-        self.goal_area = (
-            shapely.union_all([shapely.Polygon(ring) for ring in ego.goal_region])
-            if ego.goal_region
-            else None
-        )
+        rings = ego.goal_region
+        self.goal_area = shapely.union_all([shapely.Polygon(r) for r in rings]) if rings else None
         users = scenario.road_users
         recorded = [u.behaviour.kind is BehaviourKind.RECORDED for u in users]
         # A recorded body needs no route: it gets a short stand-in (shared by all of them).

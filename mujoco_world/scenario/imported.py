@@ -1,5 +1,4 @@
-"""Records of scenarios given by data rather than by parameters: a mapped road, recorded
-trajectories, fixed obstacles.
+"""Scenarios given by data: a mapped road, recorded trajectories, fixed obstacles.
 
 An importer (``scenario/commonroad.py`` for CommonRoad files) fills them; a TOML
 scenario can use them too (``road.kind = "map"`` with a ``[road.map]`` table, road users
