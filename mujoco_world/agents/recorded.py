@@ -99,8 +99,7 @@ class RecordedTracks:
         last = self.count - 1
         i = np.clip(np.floor(u).astype(int), 0, last - 1)
         f = np.clip(u - i, 0.0, 1.0)
-        before, after = u < 0.0, u > last
-        return self._hermite(i, f, before | after)
+        return self._hermite(i, f, ~self.present(time))
 
     def _hermite(
         self, i: np.ndarray, f: np.ndarray, outside: np.ndarray

@@ -91,6 +91,8 @@ class World:
         history_step: period [s] at which the world samples every body's motion for
             the observed ``RoadUser.history`` (a multiple of ``timestep``).
         history_length: samples kept per body (the current one included).
+        ego_present: False builds the world without its ego (the ego's body waits
+            outside, without contacts): a replay of the road users alone.
 
     Raises:
         ValueError: the scenario places bodies overlapping at the start or routes
@@ -106,6 +108,7 @@ class World:
         control_interval: int = 10,
         history_step: float = 0.1,
         history_length: int = 31,
+        ego_present: bool = True,
     ) -> None:
         if not (isinstance(control_interval, int) and control_interval >= 1):
             raise ValueError(f"control_interval must be an integer >= 1, got {control_interval!r}")
@@ -167,6 +170,7 @@ class World:
         self.n = len(proxies)
         #: (n,) bool: which bodies are in the world (recorded road users enter and leave).
         self.present = np.ones(self.n, dtype=bool)
+        self.present[0] = bool(ego_present)
         self.present[1:] = self.fleet.presence(0.0)
         self._park = np.column_stack(
             [PARK_ORIGIN_M + PARK_SPACING_M * np.arange(self.n), np.full(self.n, PARK_ORIGIN_M)]
@@ -509,7 +513,7 @@ class World:
                 self._user_track_sq[following] += err * err
                 self._user_track_n[following] += 1
                 np.maximum.at(self._user_track_max, np.flatnonzero(following), err)
-        if not self.crashed[0]:
+        if not self.crashed[0] and self.present[0]:
             p, v, a, yaw, rate = self.ego_plan.sample(t)
             err = math.hypot(scene.qpos[0, 0] - p[0], scene.qpos[0, 1] - p[1])
             self._track_sq += err * err

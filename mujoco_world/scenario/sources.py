@@ -2,9 +2,10 @@
 
 Each source is one object registered in ``SCENARIO_SOURCES``; ``resolve_scenario``
 asks them in registration order and the first that accepts the reference loads it.
-Built in: scenario files (``*.toml``), generated names (``dense_urban-s3-17``) and the
-catalog (``dense_urban``). A new source (e.g. CommonRoad ``.xml`` files) is one module
-with a class like these, registered at import, plus its import at the end of this file.
+Built in: scenario files (``*.toml``), CommonRoad files (``*.xml``, imported by
+``scenario/commonroad.py``), generated names (``dense_urban-s3-17``) and the catalog
+(``dense_urban``). A new source is one module with a class like these, registered at
+import, plus its import at the end of this file.
 """
 
 from __future__ import annotations
@@ -80,7 +81,25 @@ class _CatalogSource:
         return f"a catalog name ({', '.join(CATALOG)})"
 
 
+class _CommonRoadSource:
+    """A CommonRoad scenario file ``*.xml``, optionally ``FILE.xml#PLANNING_PROBLEM_ID``."""
+
+    def accepts(self, reference: str) -> bool:
+        from mujoco_world.scenario.commonroad import is_commonroad_reference
+
+        return is_commonroad_reference(reference)
+
+    def load(self, reference: str) -> Scenario:
+        from mujoco_world.scenario.commonroad import load_commonroad
+
+        return load_commonroad(reference)
+
+    def describe(self) -> str:
+        return "a CommonRoad file *.xml (or FILE.xml#PLANNING_PROBLEM_ID)"
+
+
 SCENARIO_SOURCES.register("toml", _TomlFileSource())
+SCENARIO_SOURCES.register("commonroad", _CommonRoadSource())
 SCENARIO_SOURCES.register("generated", _GeneratedSource())
 SCENARIO_SOURCES.register("catalog", _CatalogSource())
 
