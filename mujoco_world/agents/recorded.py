@@ -24,6 +24,10 @@ from mujoco_world.scenario.imported import RecordedTrajectory
 
 #: Slack on the presence window [s] (half a physics step at 1 ms).
 PRESENCE_SLACK_S = 5e-4
+#: Largest drive acceleration a recorded body is given to follow its recording [m/s^2]
+#: (5 g): noisy recordings ask more than tyres can give (``World`` raises a recorded
+#: body's limit from the friction circle to what its recording asks, up to this).
+RECORDED_ACCEL_CAP = 5.0 * 9.81
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,4 +149,4 @@ class RecordedTracks:
         return out
 
 
-__all__ = ["PRESENCE_SLACK_S", "PeakAcceleration", "RecordedTracks"]
+__all__ = ["PRESENCE_SLACK_S", "RECORDED_ACCEL_CAP", "PeakAcceleration", "RecordedTracks"]

@@ -24,7 +24,14 @@ from ethical_planner.reference_path import ReferencePath
 from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
 from ethical_planner.validation import check_non_negative
 from mujoco_world.agents.behaviour import Fleet, WorldView
-from mujoco_world.physics.control import ControlConfig, TrajectoryReference, brake_forces, tracking_forces
+from mujoco_world.agents.recorded import RECORDED_ACCEL_CAP, RecordedTracks
+from mujoco_world.physics.control import (
+    GRAVITY,
+    ControlConfig,
+    TrajectoryReference,
+    brake_forces,
+    tracking_forces,
+)
 from mujoco_world.physics.impact import ImpactMeasurement, ImpactRecorder
 from mujoco_world.physics.scene import BodyProxy, Scene
 from mujoco_world.scenario.road import StaticBox, build_road
@@ -150,6 +157,7 @@ class World:
             for o in scenario.obstacles
         )
         self.scene = Scene(proxies, statics, scenario.contact, timestep)
+        self.accel_limit = self._acceleration_limits(users, recorded)
         self.recorder = ImpactRecorder(self.scene)
         self.lengths = np.array([p.length for p in proxies])
         self.widths = np.array([p.width for p in proxies])
@@ -263,6 +271,28 @@ class World:
         return new
 
     # ------------------------------------------------------------------ setup
+
+    def _acceleration_limits(self, users: tuple, recorded: list[bool]) -> np.ndarray:
+        """(n,) largest drive acceleration per body [m/s^2].
+
+        Every body's tyres give at most ``friction_mu g``. A recorded road user must be
+        where its recording says (the ego meets the traffic that was there), so its
+        limit is raised to what its recording asks (plus 10 %), at most
+        ``RECORDED_ACCEL_CAP``: noisy recordings (NGSIM) ask more than tyres can give.
+        ``beyond_friction`` lists them with what they ask.
+        """
+        base = self.control.friction_mu * GRAVITY
+        limit = np.full(len(users) + 1, base)
+        rows = [i for i, is_recorded in enumerate(recorded) if is_recorded]
+        #: Recorded road users whose recording asks more than the tyres give: entity -> [m/s^2].
+        self.beyond_friction: dict[int, float] = {}
+        if rows:
+            peaks = RecordedTracks([users[i].behaviour.trajectory for i in rows]).peak_accelerations()
+            for i, peak in zip(rows, peaks, strict=True):
+                if peak.value > base:
+                    limit[i + 1] = min(1.1 * peak.value, RECORDED_ACCEL_CAP)
+                    self.beyond_friction[i + 1] = peak.value
+        return limit
 
     def _check_no_overlap(self) -> None:
         bad = self.scene.overlaps()
@@ -531,6 +561,7 @@ class World:
             a_ref,
             yaw_ref,
             rate_ref,
+            self.accel_limit,
         )
         if self.crashed.any():
             rows = np.flatnonzero(self.crashed)

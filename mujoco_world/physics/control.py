@@ -63,6 +63,7 @@ def tracking_forces(
     a_ref: np.ndarray,
     yaw_ref: np.ndarray,
     yaw_rate_ref: np.ndarray,
+    accel_limit: np.ndarray | None = None,
 ) -> np.ndarray:
     """Motor inputs that make bodies track references.
 
@@ -77,13 +78,15 @@ def tracking_forces(
         a_ref: (k, 2) feed-forward accelerations [m/s^2].
         yaw_ref: (k,) reference headings [rad].
         yaw_rate_ref: (k,) reference yaw rates [rad/s].
+        accel_limit: (k,) largest planar acceleration of each body [m/s^2]; None is
+            the friction circle ``friction_mu g`` for every body.
 
     Returns:
         (k, 3) Fx [N], Fy [N], torque [N m].
     """
     acc = a_ref + config.kp * (p_ref - qpos[:, :2]) + config.kd * (v_ref - qvel[:, :2])
     norm = np.hypot(acc[:, 0], acc[:, 1])
-    limit = config.friction_mu * GRAVITY
+    limit = config.friction_mu * GRAVITY if accel_limit is None else accel_limit
     scale = np.minimum(1.0, limit / np.maximum(norm, 1e-9))
     out = np.empty((len(mass), 3))
     out[:, :2] = acc * (scale * mass)[:, None]

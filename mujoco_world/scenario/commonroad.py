@@ -11,8 +11,8 @@ lazily) and builds a ``Scenario``:
   where the route needs them), continued along successors. The planner's lanes are
   the lanelets beside the initial one (offsets measured at the ego's start).
   Speed limit: the ``MAX_SPEED`` sign of the lanelet the ego starts on, else the first
-  on its route; without one, the 85th percentile speed of the recorded motor
-  vehicles (the operating speed of traffic engineering), at least the ego's start
+  on its route; without one, the 85th percentile of the recorded motor vehicles'
+  median speeds (the operating speed of traffic engineering), at least the ego's start
   speed.
 * **Road users:** every dynamic obstacle becomes a body of its type and shape (a
   circle of radius r a round proxy of diameter 2r) following its recorded trajectory
@@ -62,7 +62,7 @@ from shapely.geometry import LineString, Polygon
 from ethical_planner.geometry import rectangle_overlap
 from ethical_planner.road_users import EGO_MASS_KG, EGO_SHAPE, MOTORISED_TYPES, RoadUserType
 from ethical_planner.validation import check, parse_enum
-from mujoco_world.agents.recorded import RecordedTracks
+from mujoco_world.agents.recorded import RECORDED_ACCEL_CAP, RecordedTracks
 from mujoco_world.physics.control import GRAVITY, ControlConfig
 from mujoco_world.scenario.commonroad_tracks import (
     COMMONROAD_TYPES,
@@ -688,13 +688,13 @@ class _Importer:
             if limit is not None and limit > 0:
                 self.notes.append(f"speed limit {limit:.1f} m/s from a MAX_SPEED sign on {where}")
                 return float(limit)
-        speeds = [t.speeds for t in tracks.tracks if t.type in MOTORISED_TYPES]
+        speeds = [float(np.median(t.speeds)) for t in tracks.tracks if t.type in MOTORISED_TYPES]
         if speeds:
-            value = float(np.percentile(np.concatenate(speeds), 85))
+            value = float(np.percentile(speeds, 85))
             limit = max(value, ego_v, 1.0)
             self.notes.append(
-                f"speed limit {limit:.1f} m/s: no MAX_SPEED sign; 85th percentile speed of the recorded "
-                f"motor vehicles ({value:.1f} m/s), at least the ego's start speed"
+                f"speed limit {limit:.1f} m/s: no MAX_SPEED sign; 85th percentile of the recorded motor "
+                f"vehicles' median speeds ({value:.1f} m/s), at least the ego's start speed"
             )
             return limit
         limit = max(ego_v, 13.9)
@@ -754,7 +754,8 @@ class _Importer:
         for user, peak in jerky[:10]:
             self.notes.append(
                 f"recording of {user.name} asks {peak.value:.1f} m/s^2 at t = {peak.time:.1f} s, beyond "
-                f"the friction limit {limit:.1f} m/s^2: its body lags its recording there"
+                f"tyre friction ({limit:.1f} m/s^2): its body is given the force to follow it "
+                f"(at most {RECORDED_ACCEL_CAP:.0f} m/s^2)"
             )
         if len(jerky) > 10:
             self.notes.append(f"... and {len(jerky) - 10} more recordings beyond the friction limit")

@@ -4,13 +4,15 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+import shapely
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ethical_planner.geometry import (
     impact_offset_fraction,
     rectangle_corners,
     rectangle_half_extent,
+    rectangle_overlap,
     velocity_angle,
     wrap_angle,
     wrap_angle_in_place,
@@ -139,3 +141,32 @@ def test_velocity_angle_by_hand():
     # same direction, T-bone, head-on, both at rest (headings 0 and pi/2 stand in), 90 deg
     got = velocity_angle(ego, other, 0.0, [0.0, 0.0, 0.0, PI / 2, 0.0])
     np.testing.assert_allclose(got, [0.0, PI / 2, PI, PI / 2, PI / 2], atol=1e-12)
+
+
+# --------------------------------------------------------------------------- rectangle overlap
+
+
+def _box(x, y, yaw, length, width):
+    cx, cy = rectangle_corners(x, y, yaw, length, width)
+    return shapely.Polygon(np.column_stack([cx, cy]))
+
+
+def test_rectangle_overlap_by_hand():
+    # Two axis-aligned 4 x 2 boxes 3 m apart along x: 1 m deep along x.
+    assert rectangle_overlap(0, 0, 0, 4, 2, 3, 0, 0, 4, 2) == pytest.approx(1.0)
+    # 5 m apart: a gap of 1 m.
+    assert rectangle_overlap(0, 0, 0, 4, 2, 5, 0, 0, 4, 2) == pytest.approx(-1.0)
+    # Side by side, 1.5 m apart across: 0.5 m deep across.
+    assert rectangle_overlap(0, 0, 0, 4, 2, 0, 1.5, 0, 4, 2) == pytest.approx(0.5)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.floats(-6, 6), st.floats(-6, 6), st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi),
+    st.floats(0.3, 6), st.floats(0.3, 3), st.floats(0.3, 6), st.floats(0.3, 3),
+)  # fmt: skip
+def test_rectangle_overlap_agrees_with_polygon_intersection(x, y, yaw_a, yaw_b, la, wa, lb, wb):
+    depth = float(rectangle_overlap(0.0, 0.0, yaw_a, la, wa, x, y, yaw_b, lb, wb))
+    area = _box(0.0, 0.0, yaw_a, la, wa).intersection(_box(x, y, yaw_b, lb, wb)).area
+    if abs(depth) > 1e-6:
+        assert (depth > 0) == (area > 1e-9)

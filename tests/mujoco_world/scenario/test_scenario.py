@@ -178,12 +178,13 @@ def test_generated_names_rebuild_their_scenarios():
 
 
 def test_scenario_names_resolve_through_the_sources():
-    assert SCENARIO_SOURCES.names() == ("toml", "generated", "catalog")
+    assert SCENARIO_SOURCES.names() == ("toml", "commonroad", "generated", "catalog")
     assert resolve_scenario(str(EXAMPLE)).name == "example_cut_in"
     with pytest.raises(ValueError) as error:
         resolve_scenario("warp_drive")
     message = str(error.value)
     assert message.startswith("unknown scenario 'warp_drive'; allowed: a scenario file *.toml; ")
+    assert "a CommonRoad file *.xml" in message
     assert "<family>-s<seed>-<index>" in message and "dense_urban" in message
     with pytest.raises(ValueError, match="cannot read scenario file missing.toml"):
         resolve_scenario("missing.toml")

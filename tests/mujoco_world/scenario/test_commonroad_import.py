@@ -1,0 +1,318 @@
+"""CommonRoad import: files written here by commonroad-io (run anywhere) and the shared real files."""
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+pytest.importorskip("commonroad")
+pytest.importorskip("commonroad_route_planner")
+
+from ethical_planner.road_users import RoadUserType  # noqa: E402
+from mujoco_world.loop.replay import replay  # noqa: E402
+from mujoco_world.loop.world import World  # noqa: E402
+from mujoco_world.scenario.commonroad import (  # noqa: E402
+    CommonRoadImportError,
+    import_commonroad,
+    load_commonroad,
+    split_reference,
+)
+from mujoco_world.scenario.commonroad_tracks import shared_commonroad  # noqa: E402
+from mujoco_world.scenario.sources import resolve_scenario  # noqa: E402
+from mujoco_world.scenario.spec import BehaviourKind, RoadKind  # noqa: E402
+from tests.mujoco_world.scenario.commonroad_builder import (  # noqa: E402
+    LANE,
+    Circle,
+    ObstacleType,
+    Rectangle,
+    moving_obstacle,
+    planning_problem,
+    set_based_obstacle,
+    static_obstacle,
+    straight_line,
+    straight_road_file,
+)
+
+SHARED = shared_commonroad()
+needs_shared = pytest.mark.skipif(SHARED is None, reason="../shared/commonroad is absent")
+
+
+def _traffic():
+    """A car ahead in the right lane (whole run), a late pedestrian on the pavement, a bicycle."""
+    car = moving_obstacle(
+        10, ObstacleType.CAR, Rectangle(4.4, 1.8), 0, straight_line((60, -LANE / 2), 8, 0, 81), 0.0
+    )
+    walker = moving_obstacle(
+        11,
+        ObstacleType.PEDESTRIAN,
+        Circle(0.3),
+        20,
+        straight_line((100, -6.0), 1.4, math.pi / 2, 31),
+        math.pi / 2,
+    )
+    bike = moving_obstacle(
+        12, ObstacleType.BICYCLE, Rectangle(1.8, 0.6), 5, straight_line((30, 2.5), 5, 0, 40), 0.0
+    )
+    return [car, walker, bike]
+
+
+def test_a_written_file_becomes_a_map_scenario_with_its_recorded_road_users(tmp_path):
+    path = straight_road_file(tmp_path, _traffic(), speed_sign=15.0)
+    scenario = import_commonroad(path)
+    assert scenario.road.kind is RoadKind.MAP
+    # The drivable area is the union of the lanelets near the route: 300 m x 7 m.
+    area = shapely.union_all([shapely.Polygon(r) for r in scenario.road.map.area])
+    assert area.area == pytest.approx(300 * 2 * LANE, rel=1e-3)
+    # Lanes: the ego's (offset 0) and the left one (+3.5 m).
+    assert scenario.road.map.lane_offsets == pytest.approx((0.0, LANE), abs=0.02)
+    assert scenario.road.map.lane_width == pytest.approx(LANE)
+    assert scenario.road.speed_limit == pytest.approx(15.0)
+    assert any("MAX_SPEED sign" in n for n in scenario.notes)
+    # The ego: the planning problem's initial state; its goal region is the rectangle.
+    ego = scenario.ego
+    assert ego.pose == pytest.approx((20.0, -LANE / 2, 0.0)) and ego.speed == pytest.approx(10.0)
+    goal = shapely.Polygon(ego.goal_region[0])
+    assert goal.area == pytest.approx(30.0) and goal.centroid.x == pytest.approx(150.0)
+    # Time limit: the goal allows 8.0 s, the traffic lasts 8.0 s.
+    assert scenario.duration == pytest.approx(8.0)
+    users = {u.name: u for u in scenario.road_users}
+    assert set(users) == {"car_10", "pedestrian_11", "bicycle_12"}
+    walker = users["pedestrian_11"]
+    assert walker.type is RoadUserType.PEDESTRIAN and walker.shape == pytest.approx((0.6, 0.6))
+    assert walker.behaviour.kind is BehaviourKind.RECORDED
+    trajectory = walker.behaviour.trajectory
+    assert trajectory.start == pytest.approx(2.0) and trajectory.end == pytest.approx(5.0)
+    assert (trajectory.x[0], trajectory.y[0]) == pytest.approx((100.0, -6.0))
+
+
+def test_the_route_changes_lane_to_reach_a_goal_on_the_other_lane(tmp_path):
+    scenario = import_commonroad(straight_road_file(tmp_path))
+    path = np.asarray(scenario.road.map.reference_path)
+    assert path[0, 1] == pytest.approx(-LANE / 2, abs=0.01)  # starts in the ego's lane
+    at_goal = path[np.argmin(np.abs(path[:, 0] - 200.0))]
+    assert at_goal[1] == pytest.approx(LANE / 2, abs=0.01)  # in the goal's lane by the lanelet's end
+    assert "1 lane change" in " ".join(scenario.notes)
+    # Continued along the successor lanelet 4 (to x = 300) and straight beyond.
+    assert path[-1, 0] > 300.0
+
+
+def test_recorded_road_users_enter_and_leave_the_world(tmp_path):
+    scenario = import_commonroad(straight_road_file(tmp_path, _traffic()))
+    world = World(scenario)
+    walker = 1 + [u.name for u in scenario.road_users].index("pedestrian_11")
+    seen = {}
+    for step in range(int(6.0 / world.scene.dt)):
+        world.step()
+        if step % 100 == 0:
+            seen[round(world.time, 1)] = (bool(world.present[walker]), world.scene.qpos[walker, :2].copy())
+    assert not seen[1.0][0] and seen[1.0][1][0] > 1e4  # not yet in the world: parked far away
+    assert seen[3.0][0] and seen[3.0][1] == pytest.approx((100.0, -6.0 + 1.4 * 1.0), abs=0.01)
+    assert not seen[5.5][0]  # its recording ended at 5.0 s
+    events = {(world.scene.names[e], what): t for t, e, what in world.presence_events}
+    # Presence is updated with the controllers (every 10 ms).
+    assert events[("pedestrian_11", "enter")] == pytest.approx(2.0, abs=0.011)
+    assert events[("pedestrian_11", "leave")] == pytest.approx(5.0, abs=0.011)
+    # The planner sees only road users in the world.
+    _, users = world.observe()
+    assert walker not in {u.id for u in users}
+
+
+def test_replay_without_the_ego_follows_every_recording_within_a_centimetre(tmp_path):
+    report = replay(import_commonroad(straight_road_file(tmp_path, _traffic())))
+    assert report.collisions == ()
+    assert report.overall_rms < 0.01 and report.worst_rms < 0.01
+
+
+def test_overlapping_recorded_shapes_get_no_contact_and_a_note(tmp_path):
+    # Two cars recorded 3 m apart along the same line: their 4.4 m shapes overlap by 1.4 m.
+    a = moving_obstacle(
+        20, ObstacleType.CAR, Rectangle(4.4, 1.8), 0, straight_line((60, -LANE / 2), 8, 0, 40), 0.0
+    )
+    b = moving_obstacle(
+        21, ObstacleType.CAR, Rectangle(4.4, 1.8), 0, straight_line((63, -LANE / 2), 8, 0, 40), 0.0
+    )
+    scenario = import_commonroad(straight_road_file(tmp_path, [a, b]))
+    assert scenario.contact.exclude == (("car_20", "car_21"),)
+    note = next(n for n in scenario.notes if "overlap" in n)
+    assert "car_20 and car_21 overlap (up to 1.40 m" in note
+    assert replay(scenario).collisions == ()
+    # Without the exclusion the same recordings collide (the test can fail).
+    import dataclasses
+
+    forced = dataclasses.replace(scenario, contact=dataclasses.replace(scenario.contact, exclude=()))
+    with pytest.raises(ValueError, match="overlap at the start"):
+        replay(forced)
+
+
+def test_a_time_step_disagreeing_with_the_velocities_is_corrected(tmp_path):
+    # Positions move 2x further per declared 0.1 s step than the velocity (10 m/s) says.
+    positions = straight_line((60, -LANE / 2), 10, 0, 40, step_scale=2.0)
+    car = moving_obstacle(
+        10, ObstacleType.CAR, Rectangle(4.4, 1.8), 0, positions, 0.0, speeds=np.full(40, 10.0)
+    )
+    scenario = import_commonroad(straight_road_file(tmp_path, [car]))
+    trajectory = scenario.road_users[0].behaviour.trajectory
+    assert trajectory.dt == pytest.approx(0.2)
+    assert any("using 0.2 s" in n for n in scenario.notes)
+    # The time limit and the goal's time are in the corrected step too: 40 states x 0.2 s.
+    assert scenario.duration == pytest.approx(7.8)
+
+
+def test_a_goal_of_time_only_ends_the_run_at_its_time(tmp_path):
+    problem = planning_problem(goal=None, goal_steps=(0, 30))
+    scenario = import_commonroad(straight_road_file(tmp_path, problems=[problem]))
+    assert scenario.ego.goal_region == () and scenario.ego.goal_time == pytest.approx(3.0)
+    assert scenario.duration == pytest.approx(3.0)
+    assert any("goal of time only" in n for n in scenario.notes)
+    world = World(scenario)
+    for _ in range(int(2.9 / world.scene.dt)):
+        world.step()
+    assert not world.goal_reached()
+    for _ in range(200):
+        world.step()
+    assert world.goal_reached() and "goal time 3 s" in world.goal_description()
+
+
+def test_the_goal_region_is_reached_by_position(tmp_path):
+    scenario = import_commonroad(straight_road_file(tmp_path))
+    world = World(scenario)
+    assert not world.goal_reached()
+    world.scene.qpos[0, :2] = (150.0, LANE / 2)
+    assert world.goal_reached()
+
+
+def test_static_obstacles_become_fixed_or_parked_bodies(tmp_path):
+    static = [
+        static_obstacle(30, ObstacleType.PARKED_VEHICLE, (80.0, -5.0)),
+        static_obstacle(31, ObstacleType.CONSTRUCTION_ZONE, (120.0, 1.75), length=6.0, width=3.0),
+    ]
+    scenario = import_commonroad(straight_road_file(tmp_path, static=static))
+    parked = scenario.road_users[0]
+    assert parked.type is RoadUserType.PARKED_VEHICLE and parked.behaviour.kind is BehaviourKind.PARKED
+    fixed = scenario.obstacles[0]
+    assert (fixed.x, fixed.y, fixed.length, fixed.width) == pytest.approx((120.0, 1.75, 6.0, 3.0))
+    world = World(scenario)
+    assert world.scene.qpos[1, :2] == pytest.approx((80.0, -5.0))
+    boxes = [g for g in range(world.scene.model.ngeom) if world.scene.model.geom_bodyid[g] == 0]
+    assert any(np.allclose(world.scene.model.geom_size[g][:2], (3.0, 1.5)) for g in boxes)
+
+
+def test_speed_limit_without_a_sign_is_the_85th_percentile_of_the_recorded_traffic(tmp_path):
+    cars = [
+        moving_obstacle(
+            40 + k,
+            ObstacleType.CAR,
+            Rectangle(4.4, 1.8),
+            0,
+            straight_line((60 + 10 * k, 1.75), v, 0, 30),
+            0.0,
+        )
+        for k, v in enumerate([10.0, 12.0, 14.0, 16.0, 18.0])
+    ]
+    scenario = import_commonroad(straight_road_file(tmp_path, cars, problems=[planning_problem(speed=5.0)]))
+    assert scenario.road.speed_limit == pytest.approx(np.percentile([10, 12, 14, 16, 18], 85), rel=1e-3)
+    assert any("85th percentile" in n for n in scenario.notes)
+
+
+def test_a_jerky_recording_is_named_and_still_followed(tmp_path):
+    # 20 m/s, then 10 m/s from one step to the next: 100 m/s^2, beyond any tyre.
+    x = np.concatenate([60 + np.arange(10) * 2.0, 60 + 18 + np.arange(1, 21) * 1.0])
+    positions = np.column_stack([x, np.full_like(x, -LANE / 2)])
+    car = moving_obstacle(10, ObstacleType.CAR, Rectangle(4.4, 1.8), 0, positions, 0.0)
+    scenario = import_commonroad(straight_road_file(tmp_path, [car]))
+    note = next(n for n in scenario.notes if "beyond tyre friction" in n)
+    assert note.startswith("recording of car_10 asks")
+    world = World(scenario)
+    assert 1 in world.beyond_friction and world.accel_limit[1] > 9.81
+
+
+@pytest.mark.parametrize(
+    "case,reason,match",
+    [
+        ("no_problem", "no_planning_problem", "no planning problem"),
+        ("set_based", "set_based", "set-based occupancies"),
+        ("unknown_type", "unknown_obstacle_type", "type 'unknown', which the world does not simulate"),
+        ("garbage", "unreadable", "not a readable CommonRoad file"),
+        ("missing", "unreadable", "no such file"),
+    ],
+)
+def test_files_that_cannot_become_scenarios_are_refused_with_the_reason(tmp_path, case, reason, match):
+    if case == "no_problem":
+        path = straight_road_file(tmp_path, problems=[])
+    elif case == "set_based":
+        path = straight_road_file(tmp_path, [set_based_obstacle(50)])
+    elif case == "unknown_type":
+        odd = moving_obstacle(
+            51, ObstacleType.UNKNOWN, Rectangle(2, 2), 0, straight_line((60, 0), 1, 0, 5), 0.0
+        )
+        path = straight_road_file(tmp_path, [odd])
+    elif case == "garbage":
+        path = tmp_path / "garbage.xml"
+        path.write_text("<commonRoad><broken")
+    else:
+        path = tmp_path / "missing.xml"
+    with pytest.raises(CommonRoadImportError, match=match) as error:
+        import_commonroad(path)
+    assert error.value.reason == reason and str(path) in str(error.value)
+
+
+def test_references_choose_a_planning_problem_and_resolve_through_the_sources(tmp_path):
+    path = straight_road_file(
+        tmp_path, problems=[planning_problem(100), planning_problem(7, start=(40.0, LANE / 2))]
+    )
+    assert split_reference(f"{path}#7") == (path, 7)
+    default = resolve_scenario(str(path))
+    assert default.ego.pose[0] == pytest.approx(40.0)  # the lowest id, 7
+    assert any("planning problem 7 of [7, 100]" in n for n in default.notes)
+    chosen = load_commonroad(f"{path}#100")
+    assert chosen.ego.pose[0] == pytest.approx(20.0) and chosen.name.endswith("-pp100")
+    with pytest.raises(CommonRoadImportError, match=r"no planning problem 3; the file has \[7, 100\]"):
+        load_commonroad(f"{path}#3")
+
+
+# --------------------------------------------------------------------------- the shared real files
+
+REAL = [
+    "drivability-checker-datasets/highD/DEU_LocationALower26-1_261353_T-1428.cr.xml",
+    "drivability-checker-datasets/SinD/CHN_SIND-7281_1_T-75.cr.xml",
+    "drivability-checker-datasets/exiD/DEU_AachenBrand-1_431052_T-1127.cr.xml",
+    "tum-cps-scenarios/NGSIM/USA_US101-21_1_T-1.xml",
+    "commonroad-io-tests/USA_Peach-4_8_T-1.xml",
+]
+
+
+@needs_shared
+@pytest.mark.parametrize("relative", REAL)
+def test_real_recordings_replay_without_collisions_within_a_decimetre(relative):
+    scenario = import_commonroad(SHARED / relative)
+    report = replay(scenario, until=min(scenario.duration, 6.0))
+    assert report.collisions == ()
+    assert report.overall_rms < 0.1, report.tracking_rms
+
+
+@needs_shared
+@pytest.mark.parametrize(
+    "relative,reason",
+    [
+        ("tum-cps-scenarios/ZAM_Intersect-1_1_S-1.xml", "set_based"),
+        ("commonroad-io-tests/DEU_Starnberg-1_1_T-1.xml", "no_planning_problem"),
+        ("tum-cps-scenarios/DEU_Muc-2_1_T-1.xml", "no_route"),
+    ],
+)
+def test_real_unusable_files_are_refused(relative, reason):
+    with pytest.raises(CommonRoadImportError) as error:
+        import_commonroad(SHARED / relative)
+    assert error.value.reason == reason
+
+
+@needs_shared
+def test_real_sind_pedestrians_are_round_and_off_the_lanelets():
+    scenario = import_commonroad(SHARED / "drivability-checker-datasets/SinD/CHN_SIND-7281_1_T-75.cr.xml")
+    area = shapely.union_all([shapely.Polygon(r) for r in scenario.road.map.area])
+    walkers = [u for u in scenario.road_users if u.type is RoadUserType.PEDESTRIAN]
+    assert walkers and all(u.length == u.width for u in walkers)
+    starts = [shapely.Point(u.behaviour.trajectory.x[0], u.behaviour.trajectory.y[0]) for u in walkers]
+    assert any(not area.covers(p) for p in starts)
+    assert any(u.behaviour.trajectory.start > 0 for u in scenario.road_users)
+    assert scenario.road_users[0].behaviour.trajectory.dt == pytest.approx(0.5)
