@@ -102,8 +102,10 @@ PATH_STEP_M = 1.0
 PATH_EXTENSION_M = 150.0
 #: Boundary simplification tolerance [m].
 BOUNDARY_TOLERANCE_M = 0.1
-#: Recorded footprints that overlap by more than this get no contact between them [m].
-OVERLAP_TOLERANCE_M = 0.01
+#: Recorded footprints that come closer than this get no contact between them [m].
+CONTACT_MARGIN_M = 0.02
+#: Time step of the overlap check of recorded footprints [s].
+OVERLAP_CHECK_STEP_S = 0.02
 #: A track's first or last step may differ this much (relative) from its recorded velocity.
 END_STEP_TOLERANCE = 0.1
 #: Below this mean speed [m/s] a track's end step is not checked.
@@ -761,25 +763,31 @@ class _Importer:
             self.notes.append(f"... and {len(jerky) - 10} more recordings beyond the friction limit")
 
     def _overlapping_pairs(self, users: list[RoadUserSpec], tracks: list[Track]) -> list[tuple[str, str]]:
-        """Pairs of recorded road users whose footprints overlap at some common recorded step."""
+        """Pairs of recorded road users whose footprints overlap (or touch) while both exist.
+
+        Checked on the splines the bodies follow (``RecordedTracks``), every
+        ``OVERLAP_CHECK_STEP_S``: a car and a cyclist recorded every 0.5 s can overlap
+        between two recorded states.
+        """
         if len(users) < 2:
             return []
-        step = np.round(np.concatenate([t.times for t in tracks]) / self.dt).astype(int)
-        first, last = int(step.min()), int(step.max())
-        n_t, k = last - first + 1, len(tracks)
-        pose = np.full((k, n_t, 3), np.nan)
-        for i, t in enumerate(tracks):
-            cols = np.round(t.times / self.dt).astype(int) - first
-            pose[i, cols, 0:2], pose[i, cols, 2] = t.positions, t.headings
-        length = np.array([t.length for t in tracks])
-        width = np.array([t.width for t in tracks])
+        tracks_ = RecordedTracks([u.behaviour.trajectory for u in users])
+        times = np.arange(float(tracks_.start.min()), float(tracks_.end.max()) + 1e-9, OVERLAP_CHECK_STEP_S)
+        k, m = len(users), len(times)
+        pose = np.full((k, m, 3), np.nan)
+        for c, t in enumerate(times):
+            present = tracks_.present(t)
+            p, _, _, yaw, _ = tracks_.sample(t)
+            pose[present, c, 0:2], pose[present, c, 2] = p[present], yaw[present]
+        length = np.array([u.shape[0] for u in users])
+        width = np.array([u.shape[1] for u in users])
         radius = 0.5 * np.hypot(length, width)
-        pairs = []
+        pairs, lines = [], []
         for i in range(k - 1):
             j = np.arange(i + 1, k)
             dx = pose[j, :, 0] - pose[i, None, :, 0]
             dy = pose[j, :, 1] - pose[i, None, :, 1]
-            near = np.hypot(dx, dy) < (radius[i] + radius[j])[:, None]  # nan compares False
+            near = np.hypot(dx, dy) < (radius[i] + radius[j] + CONTACT_MARGIN_M)[:, None]  # nan: False
             if not near.any():
                 continue
             jj, tt = np.nonzero(near)
@@ -787,15 +795,18 @@ class _Importer:
                 pose[i, tt, 0], pose[i, tt, 1], pose[i, tt, 2], length[i], width[i],
                 pose[j[jj], tt, 0], pose[j[jj], tt, 1], pose[j[jj], tt, 2], length[j[jj]], width[j[jj]],
             )  # fmt: skip
-            for other in np.unique(j[jj][depth > OVERLAP_TOLERANCE_M]):
-                worst = float(depth[j[jj] == other].max())
-                steps = int(np.sum((j[jj] == other) & (depth > OVERLAP_TOLERANCE_M)))
+            touching = depth > -CONTACT_MARGIN_M
+            for other in np.unique(j[jj][touching]):
+                mine = j[jj] == other
+                worst = float(depth[mine].max())
+                span = float(np.sum(mine & touching)) * OVERLAP_CHECK_STEP_S
                 a, b = users[i].name, users[int(other)].name
                 pairs.append((a, b))
-                self.notes.append(
-                    f"the file's shapes of {a} and {b} overlap (up to {worst:.2f} m, "
-                    f"{steps * self.dt:.1f} s): no contact between them"
-                )
+                what = f"overlap by up to {worst:.2f} m" if worst > 0 else f"come within {-worst * 100:.0f} cm"
+                lines.append(f"the file's shapes of {a} and {b} {what} ({span:.1f} s): no contact between them")
+        self.notes += lines[:10]
+        if len(lines) > 10:
+            self.notes.append(f"... and {len(lines) - 10} more pairs without contact between them")
         return pairs
 
     def _parked_users(self) -> list[RoadUserSpec]:

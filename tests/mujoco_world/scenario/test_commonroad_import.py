@@ -135,7 +135,7 @@ def test_overlapping_recorded_shapes_get_no_contact_and_a_note(tmp_path):
     scenario = import_commonroad(straight_road_file(tmp_path, [a, b]))
     assert scenario.contact.exclude == (("car_20", "car_21"),)
     note = next(n for n in scenario.notes if "overlap" in n)
-    assert "car_20 and car_21 overlap (up to 1.40 m" in note
+    assert "car_20 and car_21 overlap by up to 1.40 m" in note
     assert replay(scenario).collisions == ()
     # Without the exclusion the same recordings collide (the test can fail).
     import dataclasses
