@@ -49,7 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "scenario",
         help="catalog name (see 'etp scenarios'), a generated name such as dense_urban-s3-17, "
-        "or a scenario .toml file",
+        "a scenario .toml file, or a CommonRoad .xml file (FILE.xml#ID picks a planning problem)",
     )
     p.add_argument(
         "--planner",
@@ -79,7 +79,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", default="logs/demo", metavar="ROOT", help="output root (default logs/demo)")
     p.add_argument("--quick", action="store_true", help="run a small subset of the catalog")
-    p.add_argument("--scenarios", default=None, help="comma-separated scenario names or .toml files")
+    p.add_argument(
+        "--scenarios", default=None, help="comma-separated scenario names, .toml or CommonRoad .xml files"
+    )
     p.add_argument(
         "--planners",
         default="ethical,selfish,standard",
@@ -298,7 +300,7 @@ def _demo(args: argparse.Namespace) -> int:
     if args.scenarios:
         scenarios = _split(args.scenarios, "--scenarios")
         for name in scenarios:
-            if name.endswith(".toml"):
+            if name.split("#", 1)[0].lower().endswith((".toml", ".xml")):
                 resolve_scenario(name)  # a bad file is bad input, not a failed run
             else:
                 get_family(name)

@@ -115,6 +115,17 @@ _PARKED_TYPES = {"parkedVehicle"}
 _REFERENCE = re.compile(r"^(?P<path>.+\.xml)(?:#(?P<pp>-?\d+))?$", re.IGNORECASE)
 
 
+#: Marks the reason key at the end of a rejection's message (a failed run's stored reason).
+REJECTED_TAG = "rejected: "
+_REJECTED_KEY = re.compile(r"\[" + re.escape(REJECTED_TAG) + r"(?P<key>[a-z_]+)\]$")
+
+
+def rejection_reason(message: str) -> str | None:
+    """The ``REJECTION_REASONS`` key at the end of a rejection's message, else None."""
+    match = _REJECTED_KEY.search(message.strip())
+    return match["key"] if match else None
+
+
 class CommonRoadImportError(ValueError):
     """A CommonRoad file that cannot become a scenario.
 
@@ -124,7 +135,7 @@ class CommonRoadImportError(ValueError):
     """
 
     def __init__(self, path: str | Path, reason: str, message: str) -> None:
-        super().__init__(f"{path}: {message}")
+        super().__init__(f"{path}: {message} [{REJECTED_TAG}{reason}]")
         self.path = str(path)
         self.reason = reason
 
@@ -802,8 +813,12 @@ class _Importer:
                 span = float(np.sum(mine & touching)) * OVERLAP_CHECK_STEP_S
                 a, b = users[i].name, users[int(other)].name
                 pairs.append((a, b))
-                what = f"overlap by up to {worst:.2f} m" if worst > 0 else f"come within {-worst * 100:.0f} cm"
-                lines.append(f"the file's shapes of {a} and {b} {what} ({span:.1f} s): no contact between them")
+                what = (
+                    f"overlap by up to {worst:.2f} m" if worst > 0 else f"come within {-worst * 100:.0f} cm"
+                )
+                lines.append(
+                    f"the file's shapes of {a} and {b} {what} ({span:.1f} s): no contact between them"
+                )
         self.notes += lines[:10]
         if len(lines) > 10:
             self.notes.append(f"... and {len(lines) - 10} more pairs without contact between them")
@@ -871,10 +886,12 @@ def _waypoints_at(x: float, y: float, yaw: float):
 
 
 __all__ = [
+    "REJECTED_TAG",
     "REJECTION_REASONS",
     "CommonRoadImportError",
     "ImportOptions",
     "import_commonroad",
+    "rejection_reason",
     "is_commonroad_reference",
     "load_commonroad",
     "split_reference",

@@ -16,6 +16,7 @@ from mujoco_world.scenario.commonroad import (  # noqa: E402
     CommonRoadImportError,
     import_commonroad,
     load_commonroad,
+    rejection_reason,
     split_reference,
 )
 from mujoco_world.scenario.commonroad_tracks import shared_commonroad  # noqa: E402
@@ -255,6 +256,8 @@ def test_files_that_cannot_become_scenarios_are_refused_with_the_reason(tmp_path
     with pytest.raises(CommonRoadImportError, match=match) as error:
         import_commonroad(path)
     assert error.value.reason == reason and str(path) in str(error.value)
+    # A batch stores only the message: the key is read back from it.
+    assert rejection_reason(f"CommonRoadImportError: {error.value}") == reason
 
 
 def test_references_choose_a_planning_problem_and_resolve_through_the_sources(tmp_path):
