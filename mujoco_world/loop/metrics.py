@@ -21,7 +21,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from ethical_planner.road_users import VULNERABLE_TYPES
+from ethical_planner.road_users import VULNERABLE_TYPES, RoadUserType
 from mujoco_world.agents.ego_planner import Plan
 from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.evaluation.safety import time_to_collision
@@ -97,6 +97,43 @@ class RiskLog(Metric):
         return {
             "max_risk": {g: (max(v) if v else 0.0) for g, v in self.top.items()},
             "top_risks": {g: tuple(sorted(v, reverse=True)) for g, v in self.top.items()},
+        }
+
+
+class RiskByType(Metric):
+    """Highest risk values per road-user type along the executed plans.
+
+    The study forms any grouping from these afterwards (with or without motorcycles
+    among the vulnerable road users). Values: ``top_risks_by_type`` (the road users'
+    R_k of the chosen plans) and ``top_ego_risks_by_type`` (the ego's R_ego,k per
+    partner type, as the paper's reference evaluation counts the ego's risk), up to
+    ``TOP_RISKS`` per type, highest first.
+    """
+
+    def start(self, run: RunState) -> None:
+        """Empty heaps."""
+        self.top: dict[str, list[float]] = {}
+        self.top_ego: dict[str, list[float]] = {}
+
+    @staticmethod
+    def _push(heap: list[float], value: float) -> None:
+        if len(heap) < TOP_RISKS:
+            heapq.heappush(heap, value)
+        elif value > heap[0]:
+            heapq.heapreplace(heap, value)
+
+    def on_cycle(self, run: RunState, plan: Plan) -> None:
+        """Every road user's R_k and R_ego,k of the chosen plan."""
+        for u in plan.decision.road_users if plan.decision is not None else ():
+            kind = RoadUserType(u.type).value
+            self._push(self.top.setdefault(kind, []), float(u.risk))
+            self._push(self.top_ego.setdefault(kind, []), float(u.ego_risk))
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``top_risks_by_type`` and ``top_ego_risks_by_type``."""
+        return {
+            "top_risks_by_type": {k: tuple(sorted(v, reverse=True)) for k, v in self.top.items()},
+            "top_ego_risks_by_type": {k: tuple(sorted(v, reverse=True)) for k, v in self.top_ego.items()},
         }
 
 
@@ -283,6 +320,7 @@ def default_metrics(config: RunConfig) -> tuple[Metric, ...]:
     """The built-in metrics (every metric field of ``RunSummary``)."""
     return (
         RiskLog(),
+        RiskByType(),
         ValidityLevels(),
         PlannedCollisionProbability(),
         MinDistance(config.distance_interval),

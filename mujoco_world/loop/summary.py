@@ -77,6 +77,8 @@ class RunSummary:
             under the default crash criterion ``rules.EgoContact``).
         max_risk: highest risk per group (ego, third_party, vulnerable) along the
             executed plans. top_risks: up to 100 highest risk values per group.
+        top_risks_by_type, top_ego_risks_by_type: up to 100 highest road-user risks
+            R_k, and ego risks R_ego,k, per road-user type (``metrics.RiskByType``).
         harm: summed measured harm per group over all collisions.
         harm_ego_involved: the same over the collisions the ego took part in.
         harm_third_party: the same over collisions between other road users.
@@ -110,6 +112,8 @@ class RunSummary:
     ego_collided: bool = False
     max_risk: dict[str, float] = field(default_factory=dict)
     top_risks: dict[str, tuple[float, ...]] = field(default_factory=dict)
+    top_risks_by_type: dict[str, tuple[float, ...]] = field(default_factory=dict)
+    top_ego_risks_by_type: dict[str, tuple[float, ...]] = field(default_factory=dict)
     harm: dict[str, float] = field(default_factory=dict)
     harm_ego_involved: dict[str, float] = field(default_factory=dict)
     harm_third_party: dict[str, float] = field(default_factory=dict)

@@ -19,6 +19,7 @@ from mujoco_world.loop.metrics import (
     HarmPerGroup,
     Metric,
     MinDistance,
+    RiskByType,
     RiskLog,
     ValidityLevels,
     default_metrics,
@@ -186,7 +187,8 @@ def test_a_collision_found_at_the_end_turns_clean_outcomes_into_crash():
 
 def _decision(ego_risk, users):
     road_users = tuple(
-        SimpleNamespace(type=RoadUserType(t), risk=r, collision_probability=0.0) for t, r in users
+        SimpleNamespace(type=RoadUserType(t), risk=r, ego_risk=r / 10, collision_probability=0.0)
+        for t, r in users
     )
     decision = SimpleNamespace(ego_combined_risk=ego_risk, road_users=road_users, level=10)
     return SimpleNamespace(decision=decision)  # a plan with its decision
@@ -202,6 +204,23 @@ def test_risk_log_keeps_the_highest_values_per_group():
     top = values["top_risks"]
     assert len(top["ego"]) == TOP_RISKS and top["ego"][0] == 0.149 and top["ego"][-1] == 0.05
     assert top["vulnerable"][-1] == pytest.approx(0.901)
+
+
+def test_risk_by_type_keeps_the_highest_values_per_road_user_type():
+    metric = RiskByType()
+    metric.start(None)
+    for k in range(150):  # two cars, one motorcycle per cycle
+        users = [("car", k / 100), ("car", k / 200), ("motorcycle", 1.0 - k / 1000)]
+        metric.on_cycle(None, _decision(0.0, users))
+    metric.on_cycle(None, SimpleNamespace(decision=None))  # a scripted planner's cycle
+    values = metric.values(None)
+    cars, bikes = values["top_risks_by_type"]["car"], values["top_risks_by_type"]["motorcycle"]
+    # The 100 highest of 300 car values, sorted independently.
+    expected = sorted([k / 100 for k in range(150)] + [k / 200 for k in range(150)], reverse=True)[:TOP_RISKS]
+    assert cars == pytest.approx(expected) and len(cars) == TOP_RISKS
+    assert bikes[0] == 1.0 and bikes[-1] == pytest.approx(1.0 - 99 / 1000)
+    assert values["top_ego_risks_by_type"]["car"][0] == pytest.approx(0.149)
+    assert set(values["top_risks_by_type"]) == {"car", "motorcycle"}
 
 
 def test_harm_per_group_sums_measured_harm_and_skips_walls():
