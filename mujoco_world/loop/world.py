@@ -148,8 +148,17 @@ class World:
         ]
         self.fleet = Fleet(users, routes, scenario.road.speed_limit, behaviour_tick)
         proxies = [BodyProxy("ego", ego.type, ego.length, ego.width, ego.mass)]
+        # A recorded body's recording already says where it went, and a mapped road's
+        # parked bodies may stand on the kerb (pavement parking): kerbs do not stop them.
+        on_map = scenario.road.kind is RoadKind.MAP
         proxies += [
-            BodyProxy.of_type(u.name, u.type, *u.shape, u.mass, kerbs=False if is_recorded else None)
+            BodyProxy.of_type(
+                u.name,
+                u.type,
+                *u.shape,
+                u.mass,
+                kerbs=False if is_recorded or (on_map and u.behaviour.kind is BehaviourKind.PARKED) else None,
+            )
             for u, is_recorded in zip(users, recorded, strict=True)
         ]
         statics = self.road.static_boxes() + tuple(

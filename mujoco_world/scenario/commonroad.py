@@ -22,8 +22,10 @@ lazily) and builds a ``Scenario``:
   highD and SinD files declare a step 2x and 5x too short). Pairs whose recorded
   footprints overlap get no contact (``contact.exclude``) and the notes say so.
   Recordings that ask more acceleration than the friction limit are named in the
-  notes. Static obstacles: parked vehicles become parked bodies, every other kind a
-  fixed body.
+  notes. Static obstacles: parked vehicles and obstacles of unknown type (the
+  hand-crafted files' blocked lanes) become parked bodies, which the planner perceives
+  as road users; every other kind (construction zones, buildings...) a fixed body, which
+  only the physics sees (the notes say so).
 * **Ego:** the planning problem's initial state (the lowest planning-problem id unless
   ``ImportOptions.planning_problem`` or a ``FILE.xml#ID`` reference names one); the
   default ego's shape and mass (BMW 320i). World time 0 is the planning problem's
@@ -110,8 +112,8 @@ OVERLAP_CHECK_STEP_S = 0.02
 END_STEP_TOLERANCE = 0.1
 #: Below this mean speed [m/s] a track's end step is not checked.
 MIN_END_SPEED = 2.0
-#: Dynamic obstacle types that become fixed bodies when static.
-_PARKED_TYPES = {"parkedVehicle"}
+#: Static obstacle types that become parked bodies (the planner perceives them).
+_PARKED_TYPES = {"parkedVehicle", "unknown"}
 _REFERENCE = re.compile(r"^(?P<path>.+\.xml)(?:#(?P<pp>-?\d+))?$", re.IGNORECASE)
 
 
@@ -830,6 +832,11 @@ class _Importer:
             if obstacle.obstacle_type.value not in _PARKED_TYPES:
                 continue
             x, y, yaw, length, width = self._static_pose(obstacle)
+            if obstacle.obstacle_type.value != "parkedVehicle":
+                self.notes.append(
+                    f"static obstacle {obstacle.obstacle_id} ({obstacle.obstacle_type.value}) is a parked "
+                    "vehicle, so that the planner perceives it"
+                )
             out.append(
                 RoadUserSpec(
                     name=_name(RoadUserType.PARKED_VEHICLE, obstacle.obstacle_id),
@@ -850,7 +857,10 @@ class _Importer:
                 continue
             x, y, yaw, length, width = self._static_pose(obstacle)
             out.append(ObstacleSpec(f"{kind}_{obstacle.obstacle_id}", x, y, yaw, length, width))
-            self.notes.append(f"static obstacle {obstacle.obstacle_id} ({kind}) is a fixed body")
+            self.notes.append(
+                f"static obstacle {obstacle.obstacle_id} ({kind}) is a fixed body: the physics has it, "
+                "the planner does not perceive it"
+            )
         return out
 
     @staticmethod

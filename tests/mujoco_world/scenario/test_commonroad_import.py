@@ -187,10 +187,15 @@ def test_static_obstacles_become_fixed_or_parked_bodies(tmp_path):
     static = [
         static_obstacle(30, ObstacleType.PARKED_VEHICLE, (80.0, -5.0)),
         static_obstacle(31, ObstacleType.CONSTRUCTION_ZONE, (120.0, 1.75), length=6.0, width=3.0),
+        static_obstacle(32, ObstacleType.UNKNOWN, (60.0, 1.75)),
     ]
     scenario = import_commonroad(straight_road_file(tmp_path, static=static))
-    parked = scenario.road_users[0]
+    parked, blocking = scenario.road_users
     assert parked.type is RoadUserType.PARKED_VEHICLE and parked.behaviour.kind is BehaviourKind.PARKED
+    # An obstacle of unknown type blocks a lane: the planner must perceive it, so it is parked too.
+    assert blocking.type is RoadUserType.PARKED_VEHICLE
+    assert blocking.route.waypoints[0] == pytest.approx((60.0, 1.75))
+    assert any("32 (unknown) is a parked vehicle" in n for n in scenario.notes)
     fixed = scenario.obstacles[0]
     assert (fixed.x, fixed.y, fixed.length, fixed.width) == pytest.approx((120.0, 1.75, 6.0, 3.0))
     world = World(scenario)
