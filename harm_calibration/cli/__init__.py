@@ -1,7 +1,7 @@
 """The ``etp`` command line (the application layer): one module per command group.
 
 ``planner`` (harm, plan), ``bench``, ``world`` (scenarios, run, demo), ``runs``
-(near-crash, replay), ``impacts`` (impacts, refit-harm) and ``predictor`` (train, eval)
+(near-crash, replay), ``study``, ``impacts`` (impacts, refit-harm) and ``predictor`` (train, eval)
 each register their
 subcommands here. Nothing below this package imports it.
 """
@@ -18,6 +18,7 @@ from harm_calibration.cli import impacts as cli_impacts
 from harm_calibration.cli import planner as planner_cli
 from harm_calibration.cli import predictor as predictor_cli
 from harm_calibration.cli import runs as runs_cli
+from harm_calibration.cli import study as study_cli
 from harm_calibration.cli import world as world_cli
 from harm_calibration.cli.process import keep_freed_memory
 
@@ -44,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench_cli.register(subparsers)
     world_cli.register(subparsers)
     runs_cli.register(subparsers)
+    study_cli.register(subparsers)
     cli_impacts.register(subparsers)
     predictor_cli.register(subparsers)
     return parser

@@ -22,6 +22,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ethical_planner.validation import check
+
 #: Bytes written by the probe of an output folder (a full disk fails here, not after a run).
 PROBE_BYTES = 64 * 1024
 
@@ -95,6 +97,37 @@ def say(args: argparse.Namespace, message: str) -> None:
 def show_progress(args: argparse.Namespace) -> bool:
     """True unless ``--no-progress`` was given or stderr is not a terminal."""
     return not getattr(args, "no_progress", False) and sys.stderr.isatty()
+
+
+def split_items(text: str, what: str) -> list[str]:
+    """Comma-separated items of option ``what``, each once.
+
+    Raises:
+        ValueError: no item, or an item given twice (named).
+    """
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    check(bool(items), f"{what} must name at least one item")
+    twice = sorted({item for item in items if items.count(item) > 1})
+    check(not twice, f"{what} lists {', '.join(twice)} more than once")
+    return items
+
+
+def non_negative(value: int, option: str) -> None:
+    """Raise a ValueError naming ``option`` unless ``value`` >= 0."""
+    check(value >= 0, f"{option} must be an integer >= 0, got {value}")
+
+
+def parse_seeds(text: str, option: str = "--seeds") -> list[int]:
+    """Comma-separated run seeds, each an integer >= 0, each once."""
+    try:
+        seeds = [int(s) for s in split_items(text, option)]
+    except ValueError as error:
+        if "more than once" in str(error) or "at least one" in str(error):
+            raise
+        raise ValueError(f"{option} must be comma-separated integers, got {text!r}") from None
+    for seed in seeds:
+        non_negative(seed, option)
+    return seeds
 
 
 def add_json(parser: argparse.ArgumentParser) -> None:

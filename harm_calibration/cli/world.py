@@ -15,11 +15,14 @@ from ethical_planner.validation import check
 from harm_calibration.cli.common import (
     add_config,
     add_json,
+    non_negative,
     output_dir,
+    parse_seeds,
     planner_configs,
     print_json,
     say,
     show_progress,
+    split_items,
 )
 from harm_calibration.cli.process import keep_freed_memory
 
@@ -166,18 +169,6 @@ def _recording_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _split(text: str, what: str) -> list[str]:
-    items = [item.strip() for item in text.split(",") if item.strip()]
-    check(bool(items), f"{what} must name at least one item")
-    twice = sorted({item for item in items if items.count(item) > 1})
-    check(not twice, f"{what} lists {', '.join(twice)} more than once")
-    return items
-
-
-def _non_negative(value: int, option: str) -> None:
-    check(value >= 0, f"{option} must be an integer >= 0, got {value}")
-
-
 def _scenarios(args: argparse.Namespace) -> int:
     from mujoco_world.scenario.catalog import CATALOG, catalog_names, describe, get_scenario
 
@@ -235,7 +226,7 @@ def _run(args: argparse.Namespace) -> int:
     from mujoco_world.loop.world import ObservationNoise
     from mujoco_world.scenario.sources import resolve_scenario
 
-    _non_negative(args.seed, "--seed")
+    non_negative(args.seed, "--seed")
     check(0.0 <= args.noise <= 10.0, f"--noise must lie in [0, 10] m, got {args.noise}")
     check(
         0.5 <= args.replan_rate <= 100.0, f"--replan-rate must lie in [0.5, 100] Hz, got {args.replan_rate}"
@@ -293,27 +284,20 @@ def _demo(args: argparse.Namespace) -> int:
     from mujoco_world.scenario.catalog import catalog_names, generated_names, get_family
     from mujoco_world.scenario.sources import resolve_scenario
 
-    _non_negative(args.random, "--random")
-    _non_negative(args.scenario_seed, "--scenario-seed")
+    non_negative(args.random, "--random")
+    non_negative(args.scenario_seed, "--scenario-seed")
     check(args.workers >= 1, f"--workers must be >= 1, got {args.workers}")
     families = None
     if args.scenarios:
-        scenarios = _split(args.scenarios, "--scenarios")
+        scenarios = split_items(args.scenarios, "--scenarios")
         for name in scenarios:
             if name.split("#", 1)[0].lower().endswith((".toml", ".xml")):
                 resolve_scenario(name)  # a bad file is bad input, not a failed run
             else:
                 get_family(name)
         families = scenarios
-    planners = planner_configs(_split(args.planners, "--planners"), args.config)
-    try:
-        seeds = [int(s) for s in _split(args.seeds, "--seeds")]
-    except ValueError as error:
-        if "more than once" in str(error) or "at least one" in str(error):
-            raise
-        raise ValueError(f"--seeds must be comma-separated integers, got {args.seeds!r}") from None
-    for seed in seeds:
-        _non_negative(seed, "--seeds")
+    planners = planner_configs(split_items(args.planners, "--planners"), args.config)
+    seeds = parse_seeds(args.seeds)
     runs = (args.random or 1) * len(planners) * len(seeds)
     check(
         runs <= MAX_RUNS,

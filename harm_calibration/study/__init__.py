@@ -1,0 +1,1 @@
+"""The paper's study (``etp study``): runs, statistics, figures and report."""

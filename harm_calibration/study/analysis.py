@@ -164,7 +164,9 @@ def top_risks(runs: Iterable[StudyRun], group: str, groups: GroupDefinition, n: 
     return np.sort(np.asarray(values, dtype=float))[::-1][:n]
 
 
-def summed_harm(runs: Iterable[StudyRun], group: str, groups: GroupDefinition, ego: bool | None = None) -> float:
+def summed_harm(
+    runs: Iterable[StudyRun], group: str, groups: GroupDefinition, ego: bool | None = None
+) -> float:
     """Measured harm of ``group`` summed over ``runs``."""
     return float(sum(run.group_harm(group, groups, ego) for run in runs))
 
@@ -249,7 +251,7 @@ def _by_scenario(runs: Sequence[StudyRun]) -> dict[str, list[StudyRun]]:
 
 
 def _per_scenario(runs: Sequence[StudyRun], planner: str, value) -> dict[str, float]:
-    """scenario -> ``value(runs of the scenario and planner)`` (mean over seeds)."""
+    """Scenario -> ``value(runs of the scenario and planner)`` (mean over seeds)."""
     per: dict[str, list[float]] = defaultdict(list)
     for run in runs:
         if run.planner == planner:
@@ -291,7 +293,9 @@ def analyse(
                 harm_ego_collisions=summed_harm(mine, group, groups, ego=True),
                 harm_other_collisions=summed_harm(mine, group, groups, ego=False),
                 harm_avoidable=summed_harm([r for r in searched if r.avoidable], group, groups, ego=True),
-                harm_unavoidable=summed_harm([r for r in searched if not r.avoidable], group, groups, ego=True),
+                harm_unavoidable=summed_harm(
+                    [r for r in searched if not r.avoidable], group, groups, ego=True
+                ),
             )
     risk_tests, harm_tests = _tests(usable, planners, groups)
     return StudyAnalysis(

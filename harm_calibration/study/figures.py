@@ -96,7 +96,11 @@ def figure_harm(analysis: StudyAnalysis, out: Path) -> list[Path]:
             bottom = 0.0
             if searched:
                 not_searched = max(s.harm_ego_collisions - s.harm_avoidable - s.harm_unavoidable, 0.0)
-                pieces = [(s.harm_unavoidable, color, None), (s.harm_avoidable, color, "xx"), (not_searched, color, "..")]
+                pieces = [
+                    (s.harm_unavoidable, color, None),
+                    (s.harm_avoidable, color, "xx"),
+                    (not_searched, color, ".."),
+                ]
             else:
                 pieces = [(s.harm_ego_collisions, color, None)]
             pieces.append((s.harm_other_collisions, "white", "//"))

@@ -101,7 +101,8 @@ def judge(analysis: StudyAnalysis) -> list[Verdict]:
         Verdict(
             "The ethical planner keeps the ego's risk similar to the selfish planner's (Fig. 5).",
             {"similar": "supported", "unclear": "inconclusive"}.get(look, "not supported"),
-            _describe(test, sign, "ethical", "selfish") + f" (similar: p(Holm) >= {ALPHA} and |r| < {SMALL_EFFECT})",
+            _describe(test, sign, "ethical", "selfish")
+            + f" (similar: p(Holm) >= {ALPHA} and |r| < {SMALL_EFFECT})",
         )
     )
     # 3. Ethical vs selfish: third-party and especially VRU risks lower.
@@ -116,7 +117,8 @@ def judge(analysis: StudyAnalysis) -> list[Verdict]:
             "The ethical planner lowers the risk of 3rd parties, and especially of VRUs, "
             "compared with the selfish planner (Fig. 5).",
             verdict,
-            f"3rd party, {_describe(third, s3, 'ethical', 'selfish')}; VRU, {_describe(vru, sv, 'ethical', 'selfish')}"
+            f"3rd party, {_describe(third, s3, 'ethical', 'selfish')}; "
+            f"VRU, {_describe(vru, sv, 'ethical', 'selfish')}"
             " (especially: the VRU effect at least the 3rd-party effect)",
         )
     )
@@ -231,7 +233,8 @@ def render(
             for t in tests[group]:
                 out.append(
                     f"| {family} | {GROUP_LABELS[group]} | {t.a} | {t.b} | {t.n} | {t.n_nonzero} | "
-                    f"{t.median_difference:.3g} | {t.rank_biserial:+.2f} | {_fmt_p(t.p)} | {_fmt_p(t.p_holm)} |"
+                    f"{t.median_difference:.3g} | {t.rank_biserial:+.2f} | {_fmt_p(t.p)} | "
+                    f"{_fmt_p(t.p_holm)} |"
                 )
     out += ["", "## Runs, outcomes, crashes", ""]
     out += [
@@ -242,13 +245,16 @@ def render(
     for p, t in analysis.table.items():
         o = t.outcomes
         out.append(
-            f"| {p} | {t.runs} | {o['goal']} | {o['timeout']} | {o['crash']} | {o['failed']} | {t.ego_crashes} | "
+            f"| {p} | {t.runs} | {o['goal']} | {o['timeout']} | {o['crash']} | {o['failed']} | "
+            f"{t.ego_crashes} | "
             f"{t.avoidable} | {t.unavoidable} | {t.km:.1f} | {t.crashes_per_1000km.text(3)} |"
         )
     if rejected_by_reason:
         out += ["", "Scenarios refused at import (not counted above):", ""]
         for reason, names in sorted(rejected_by_reason.items()):
-            out.append(f"- {reason}: {len(names)} ({', '.join(sorted(names)[:8])}{' ...' if len(names) > 8 else ''})")
+            out.append(
+                f"- {reason}: {len(names)} ({', '.join(sorted(names)[:8])}{' ...' if len(names) > 8 else ''})"
+            )
     out += ["", "## Speed", "", *speed_lines, ""]
     out += ["## Where this study differs from the paper's", "", *notes, ""]
     return "\n".join(out)
