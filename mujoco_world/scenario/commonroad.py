@@ -61,7 +61,7 @@ import shapely
 import shapely.ops
 from shapely.geometry import LineString, Polygon
 
-from ethical_planner.geometry import rectangle_overlap
+from ethical_planner.geometry import rectangle_corners, rectangle_overlap
 from ethical_planner.road_users import EGO_MASS_KG, EGO_SHAPE, MOTORISED_TYPES, RoadUserType
 from ethical_planner.validation import check, parse_enum
 from mujoco_world.agents.recorded import RECORDED_ACCEL_CAP, RecordedTracks
@@ -102,6 +102,8 @@ STEP_POLICIES = ("velocity", "declared")
 PATH_STEP_M = 1.0
 #: How far the reference path is continued past the route's end [m].
 PATH_EXTENSION_M = 150.0
+#: No road boundary this close to the ego's start footprint [m] (kerbs are 0.3 m wide).
+EGO_START_CLEARANCE_M = 1.0
 #: Boundary simplification tolerance [m].
 BOUNDARY_TOLERANCE_M = 0.1
 #: Recorded footprints that come closer than this get no contact between them [m].
@@ -360,7 +362,7 @@ class _Importer:
         goal_region, duration, goal_time = self._goal_and_duration(problem, tracks)
         reach = max(ego_v, 14.0) * 1.5 * duration + 50.0
         corridor = self._corridor(path, ego_xy, reach)
-        road_map = self._map(path, ego_xy, corridor)
+        road_map = self._map(path, ego_xy, corridor, ego_yaw)
         users, excluded = self._road_users(tracks, duration)
         users += self._parked_users()
         speed_limit = self._speed_limit(route_ids, ego_xy, tracks, ego_v)
@@ -594,7 +596,7 @@ class _Importer:
         piece = shapely.ops.substring(line, start, end) if end > start else line
         return piece.buffer(self.options.corridor)
 
-    def _map(self, path: np.ndarray, ego_xy: np.ndarray, corridor: Any) -> MapSpec:
+    def _map(self, path: np.ndarray, ego_xy: np.ndarray, corridor: Any, ego_yaw: float) -> MapSpec:
         lanelets = [ll for ll in self.network.lanelets if ll.polygon.shapely_object.intersects(corridor)]
         check(bool(lanelets), "no lanelet near the ego's route")
         area = [np.asarray(ll.polygon.vertices, dtype=float) for ll in lanelets]
@@ -610,6 +612,16 @@ class _Importer:
         if ends:
             outline = outline.difference(shapely.union_all(ends).buffer(0.05))
         outline = outline.intersection(corridor)
+        # An ego that starts across the lanelets' outline (a planning problem on a lanelet's
+        # edge) would start inside a kerb: the boundary around its start is left out.
+        xs, ys = rectangle_corners(ego_xy[0], ego_xy[1], ego_yaw, EGO_SHAPE.length, EGO_SHAPE.width)
+        start_box = Polygon(np.column_stack([xs, ys])).buffer(EGO_START_CLEARANCE_M)
+        if outline.intersects(start_box):
+            outline = outline.difference(start_box)
+            self.notes.append(
+                f"the ego starts across the lanelets' outline: no road boundary within "
+                f"{EGO_START_CLEARANCE_M:g} m of its start"
+            )
         outline = shapely.line_merge(outline) if not outline.is_empty else outline
         parts = getattr(outline, "geoms", [outline]) if not outline.is_empty else []
         boundaries = []

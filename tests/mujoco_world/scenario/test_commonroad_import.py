@@ -324,3 +324,15 @@ def test_real_sind_pedestrians_are_round_and_off_the_lanelets():
     assert any(not area.covers(p) for p in starts)
     assert any(u.behaviour.trajectory.start > 0 for u in scenario.road_users)
     assert scenario.road_users[0].behaviour.trajectory.dt == pytest.approx(0.5)
+
+
+def test_an_ego_starting_across_the_road_edge_gets_no_kerb_there(tmp_path):
+    # Centre 0.3 m inside the right edge: the ego's right side sticks 0.5 m out of the road.
+    start = planning_problem(start=(20.0, -LANE + 0.3))
+    scenario = import_commonroad(straight_road_file(tmp_path, problems=[start]))
+    assert any("starts across the lanelets' outline" in n for n in scenario.notes)
+    World(scenario)  # builds: no kerb overlaps the ego at the start
+    right = [b for b in scenario.road.map.boundaries if min(y for _, y in b) < -LANE + 0.1]
+    ends = sorted(x for b in right for x in (b[0][0], b[-1][0]))
+    # The right edge is cut around the ego (4.5 m long, 1 m clearance): a gap from about 16.7 to 23.3 m.
+    assert any(15.5 < x < 17.5 for x in ends) and any(22.5 < x < 24.5 for x in ends)
