@@ -41,7 +41,8 @@ lazily) and builds a ``Scenario``:
 A file that cannot become a scenario raises ``CommonRoadImportError`` (a
 ``ValueError``) with a short ``reason`` key (``REJECTION_REASONS``) and a message
 naming the file: unreadable, no planning problem, set-based occupancies, an obstacle
-type the world does not simulate, no route to the goal.
+type the world does not simulate, no route to the goal, an ego that starts inside a
+road user.
 
 Everything the importer decided or found is in ``Scenario.notes``.
 """
@@ -95,6 +96,7 @@ REJECTION_REASONS = {
     "unknown_obstacle_type": "an obstacle type the world does not simulate",
     "no_route": "the route planner finds no route from the initial lanelet to the goal",
     "invalid": "the file's content does not make a valid scenario",
+    "ego_overlaps": "the planning problem's initial state overlaps a road user present at the start",
 }
 #: Step policies (``commonroad_tracks.STEP_POLICIES``).
 STEP_POLICIES = ("velocity", "declared")
@@ -365,6 +367,7 @@ class _Importer:
         road_map = self._map(path, ego_xy, corridor, ego_yaw)
         users, excluded = self._road_users(tracks, duration)
         users += self._parked_users()
+        self._check_ego_start(users, ego_xy, ego_yaw)
         speed_limit = self._speed_limit(route_ids, ego_xy, tracks, ego_v)
         s_start = float(LineString(road_map.reference_path).project(shapely.Point(*ego_xy)))
         length = float(LineString(road_map.reference_path).length)
@@ -614,7 +617,9 @@ class _Importer:
         outline = outline.intersection(corridor)
         # An ego that starts across the lanelets' outline (a planning problem on a lanelet's
         # edge) would start inside a kerb: the boundary around its start is left out.
-        xs, ys = rectangle_corners(ego_xy[0], ego_xy[1], ego_yaw, EGO_SHAPE.length, EGO_SHAPE.width)
+        xs, ys = rectangle_corners(
+            ego_xy[0], ego_xy[1], ego_yaw, self.options.ego_length, self.options.ego_width
+        )
         start_box = Polygon(np.column_stack([xs, ys])).buffer(EGO_START_CLEARANCE_M)
         if outline.intersects(start_box):
             outline = outline.difference(start_box)
@@ -837,6 +842,45 @@ class _Importer:
         if len(lines) > 10:
             self.notes.append(f"... and {len(lines) - 10} more pairs without contact between them")
         return pairs
+
+    def _check_ego_start(self, users: list[RoadUserSpec], ego_xy: np.ndarray, ego_yaw: float) -> None:
+        """Refuse a file whose ego starts inside a road user that is there at the start.
+
+        (SinD planning problems place the ego in queues of recorded vehicles, overlapping
+        them by up to a metre; no collision-free start exists.)
+        """
+        poses = []
+        for u in users:
+            if u.behaviour.kind is BehaviourKind.RECORDED:
+                t = u.behaviour.trajectory
+                if t.start <= 0.0:
+                    poses.append((u.name, t.x[0], t.y[0], t.yaw[0], u.length, u.width))
+            elif u.route.waypoints:
+                (x0, y0), (x1, y1) = u.route.waypoints[:2]
+                poses.append((u.name, x0, y0, math.atan2(y1 - y0, x1 - x0), u.length, u.width))
+        if not poses:
+            return
+        names = [p[0] for p in poses]
+        x, y, yaw, length, width = np.array([p[1:] for p in poses], dtype=float).T
+        depth = rectangle_overlap(
+            ego_xy[0],
+            ego_xy[1],
+            ego_yaw,
+            self.options.ego_length,
+            self.options.ego_width,
+            x,
+            y,
+            yaw,
+            length,
+            width,
+        )
+        worst = int(np.argmax(depth))
+        if depth[worst] > CONTACT_MARGIN_M:
+            raise self.fail(
+                "ego_overlaps",
+                f"the planning problem's initial state overlaps {names[worst]} by {depth[worst]:.2f} m "
+                "at the start: no collision-free start",
+            )
 
     def _parked_users(self) -> list[RoadUserSpec]:
         out = []

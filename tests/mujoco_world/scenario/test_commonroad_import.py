@@ -241,6 +241,7 @@ def test_a_jerky_recording_is_named_and_still_followed(tmp_path):
         ("unknown_type", "unknown_obstacle_type", "type 'unknown', which the world does not simulate"),
         ("garbage", "unreadable", "not a readable CommonRoad file"),
         ("missing", "unreadable", "no such file"),
+        ("ego_inside", "ego_overlaps", "initial state overlaps car_13 by 1.50 m"),
     ],
 )
 def test_files_that_cannot_become_scenarios_are_refused_with_the_reason(tmp_path, case, reason, match):
@@ -253,6 +254,11 @@ def test_files_that_cannot_become_scenarios_are_refused_with_the_reason(tmp_path
             51, ObstacleType.UNKNOWN, Rectangle(2, 2), 0, straight_line((60, 0), 1, 0, 5), 0.0
         )
         path = straight_road_file(tmp_path, [odd])
+    elif case == "ego_inside":  # a car 3 m ahead of the ego's centre: 4.5 / 2 + 4.5 / 2 - 3 = 1.5 m
+        car = moving_obstacle(
+            13, ObstacleType.CAR, Rectangle(4.5, 1.8), 0, straight_line((23, -LANE / 2), 5, 0, 20), 0.0
+        )
+        path = straight_road_file(tmp_path, [car])
     elif case == "garbage":
         path = tmp_path / "garbage.xml"
         path.write_text("<commonRoad><broken")
