@@ -26,7 +26,7 @@ from ethical_planner.geometry import rectangle_half_extent
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.registry import Registry
 from ethical_planner.road_users import LegalCorridor, RoadUserType
-from mujoco_world.agents.recorded import RecordedTracks
+from mujoco_world.scenario.recorded_tracks import RecordedTracks
 from mujoco_world.scenario.spec import BehaviourKind, RoadUserSpec
 
 #: Resampling step of the routes [m].

@@ -374,6 +374,7 @@ class ClosedLoop:
             collisions=run.collisions,
             values=values,
             timings=timings,
+            notes=(*run.scenario.notes, *world.notes),
         )
 
 

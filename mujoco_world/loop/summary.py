@@ -97,6 +97,9 @@ class RunSummary:
             control, total) and the real-time factor.
         extra_metrics: values of metrics added to the run beyond the built-in ones
             (``loop.metrics``), by name; JSON-able.
+        notes: what the scenario's import and the world found (CommonRoad files: time
+            step corrections, overlapping recorded shapes, recordings beyond tyre
+            friction...).
     """
 
     scenario: str
@@ -128,6 +131,7 @@ class RunSummary:
     levels: dict[str, int] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     extra_metrics: dict[str, Any] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
 
     @property
     def ego_collisions(self) -> tuple[ImpactRecord, ...]:
@@ -164,7 +168,7 @@ class RunSummary:
 #: Summary fields the loop fills itself; a metric may not set them.
 _LOOP_FIELDS = frozenset(
     {"scenario", "planner", "seed", "outcome", "reason", "duration", "steps", "cycles"}
-    | {"bodies", "collisions", "ego_collided", "timings", "extra_metrics"}
+    | {"bodies", "collisions", "ego_collided", "timings", "extra_metrics", "notes"}
 )
 
 
@@ -182,6 +186,7 @@ def build_summary(
     collisions: Sequence[ImpactRecord],
     values: Mapping[str, Any],
     timings: Mapping[str, float],
+    notes: Sequence[str] = (),
 ) -> RunSummary:
     """The summary of a finished run from what the loop counted and what its metrics measured.
 
@@ -190,6 +195,7 @@ def build_summary(
             collisions, timings: as in ``RunSummary``.
         values: the metrics' values by name: a ``RunSummary`` field sets it, any
             other name goes to ``extra_metrics``.
+        notes: as in ``RunSummary``.
 
     Raises:
         ValueError: a metric value names a field the loop fills itself.
@@ -211,6 +217,7 @@ def build_summary(
         collisions=tuple(collisions),
         ego_collided=any(c.involves_ego for c in collisions),
         timings=dict(timings),
+        notes=tuple(notes),
         extra_metrics={k: v for k, v in values.items() if k not in known},
         **{k: v for k, v in values.items() if k in known},
     )

@@ -24,7 +24,6 @@ from ethical_planner.reference_path import ReferencePath
 from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
 from ethical_planner.validation import check_non_negative
 from mujoco_world.agents.behaviour import Fleet, WorldView
-from mujoco_world.agents.recorded import RECORDED_ACCEL_CAP, RecordedTracks
 from mujoco_world.physics.control import (
     GRAVITY,
     ControlConfig,
@@ -34,6 +33,7 @@ from mujoco_world.physics.control import (
 )
 from mujoco_world.physics.impact import ImpactMeasurement, ImpactRecorder
 from mujoco_world.physics.scene import BodyProxy, Scene
+from mujoco_world.scenario.recorded_tracks import RECORDED_ACCEL_CAP, RecordedTracks
 from mujoco_world.scenario.road import StaticBox, build_road
 from mujoco_world.scenario.spec import BehaviourKind, Boundary, RoadKind, RoadName, RouteSpec, Scenario
 
@@ -295,12 +295,19 @@ class World:
         rows = [i for i, is_recorded in enumerate(recorded) if is_recorded]
         #: Recorded road users whose recording asks more than the tyres give: entity -> [m/s^2].
         self.beyond_friction: dict[int, float] = {}
+        #: What the world found in the scenario, for the run summary (jerky recordings).
+        self.notes: list[str] = []
         if rows:
             peaks = RecordedTracks([users[i].behaviour.trajectory for i in rows]).peak_accelerations()
             for i, peak in zip(rows, peaks, strict=True):
                 if peak.value > base:
                     limit[i + 1] = min(1.1 * peak.value, RECORDED_ACCEL_CAP)
                     self.beyond_friction[i + 1] = peak.value
+                    self.notes.append(
+                        f"recording of {users[i].name} asks {peak.value:.1f} m/s^2 at t = {peak.time:.1f} s, "
+                        f"beyond tyre friction ({base:.1f} m/s^2): its body is given the force to follow it "
+                        f"(at most {RECORDED_ACCEL_CAP:.0f} m/s^2)"
+                    )
         return limit
 
     def _check_no_overlap(self) -> None:

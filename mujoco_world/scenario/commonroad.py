@@ -21,8 +21,8 @@ lazily) and builds a ``Scenario``:
   step checked against the recorded velocities (``commonroad_tracks.check_step``;
   highD and SinD files declare a step 2x and 5x too short). Pairs whose recorded
   footprints overlap get no contact (``contact.exclude``) and the notes say so.
-  Recordings that ask more acceleration than the friction limit are named in the
-  notes. Static obstacles: parked vehicles and obstacles of unknown type (the
+  Recordings that ask more acceleration than the friction limit are named by the
+  world in the run summary's notes. Static obstacles: parked vehicles and obstacles of unknown type (the
   hand-crafted files' blocked lanes) become parked bodies, which the planner perceives
   as road users; every other kind (construction zones, buildings...) a fixed body, which
   only the physics sees (the notes say so).
@@ -65,8 +65,6 @@ from shapely.geometry import LineString, Polygon
 from ethical_planner.geometry import rectangle_corners, rectangle_overlap
 from ethical_planner.road_users import EGO_MASS_KG, EGO_SHAPE, MOTORISED_TYPES, RoadUserType
 from ethical_planner.validation import check, parse_enum
-from mujoco_world.agents.recorded import RECORDED_ACCEL_CAP, RecordedTracks
-from mujoco_world.physics.control import GRAVITY, ControlConfig
 from mujoco_world.scenario.commonroad_tracks import (
     COMMONROAD_TYPES,
     ScenarioTracks,
@@ -76,6 +74,7 @@ from mujoco_world.scenario.commonroad_tracks import (
     scenario_tracks,
 )
 from mujoco_world.scenario.imported import MapSpec, ObstacleSpec, RecordedTrajectory
+from mujoco_world.scenario.recorded_tracks import RecordedTracks
 from mujoco_world.scenario.spec import (
     BehaviourKind,
     BehaviourSpec,
@@ -774,23 +773,7 @@ class _Importer:
                 + ", ".join(str(i) for i in trimmed[:10])
                 + (" ..." if len(trimmed) > 10 else "")
             )
-        self._check_jerk(users)
         return users, self._overlapping_pairs(users, kept)
-
-    def _check_jerk(self, users: list[RoadUserSpec]) -> None:
-        if not users:
-            return
-        limit = ControlConfig().friction_mu * GRAVITY
-        peaks = RecordedTracks([u.behaviour.trajectory for u in users]).peak_accelerations()
-        jerky = [(u, p) for u, p in zip(users, peaks, strict=True) if p.value > limit]
-        for user, peak in jerky[:10]:
-            self.notes.append(
-                f"recording of {user.name} asks {peak.value:.1f} m/s^2 at t = {peak.time:.1f} s, beyond "
-                f"tyre friction ({limit:.1f} m/s^2): its body is given the force to follow it "
-                f"(at most {RECORDED_ACCEL_CAP:.0f} m/s^2)"
-            )
-        if len(jerky) > 10:
-            self.notes.append(f"... and {len(jerky) - 10} more recordings beyond the friction limit")
 
     def _overlapping_pairs(self, users: list[RoadUserSpec], tracks: list[Track]) -> list[tuple[str, str]]:
         """Pairs of recorded road users whose footprints overlap (or touch) while both exist.

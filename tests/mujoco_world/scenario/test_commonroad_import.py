@@ -1,6 +1,7 @@
 """CommonRoad import: files written here by commonroad-io (run anywhere) and the shared real files."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ pytest.importorskip("commonroad_route_planner")
 
 from ethical_planner.road_users import RoadUserType  # noqa: E402
 from mujoco_world.loop.replay import replay  # noqa: E402
+from mujoco_world.loop.runner import run_scenario  # noqa: E402
 from mujoco_world.loop.world import World  # noqa: E402
 from mujoco_world.scenario.commonroad import (  # noqa: E402
     CommonRoadImportError,
@@ -227,10 +229,13 @@ def test_a_jerky_recording_is_named_and_still_followed(tmp_path):
     positions = np.column_stack([x, np.full_like(x, -LANE / 2)])
     car = moving_obstacle(10, ObstacleType.CAR, Rectangle(4.4, 1.8), 0, positions, 0.0)
     scenario = import_commonroad(straight_road_file(tmp_path, [car]))
-    note = next(n for n in scenario.notes if "beyond tyre friction" in n)
-    assert note.startswith("recording of car_10 asks")
     world = World(scenario)
     assert 1 in world.beyond_friction and world.accel_limit[1] > 9.81
+    note = next(n for n in world.notes if "beyond tyre friction" in n)
+    assert note.startswith("recording of car_10 asks")
+    # The run summary says so (with the importer's notes).
+    summary = run_scenario(replace(scenario, duration=0.3), "keep_lane", 0)
+    assert note in summary.notes and scenario.notes[0] in summary.notes
 
 
 @pytest.mark.parametrize(

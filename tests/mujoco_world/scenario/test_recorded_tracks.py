@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from mujoco_world.agents.recorded import RecordedTracks
 from mujoco_world.scenario.imported import RecordedTrajectory
+from mujoco_world.scenario.recorded_tracks import RecordedTracks
 
 
 def _track(start=1.0, dt=0.2, n=12, seed=0):
