@@ -82,6 +82,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--no-record", action="store_true", help="write no Rerun recordings")
     p.add_argument(
+        "--analyse-only",
+        action="store_true",
+        help="run nothing: analyse the runs of these scenarios already stored in --out (a study "
+        "stopped early), and write the figures, statistics and report of those",
+    )
+    p.add_argument(
         "--motorcycles-not-vru",
         action="store_true",
         help="count motorcyclists with the 3rd parties only, not as VRUs (the paper's reference "
@@ -103,6 +109,7 @@ def _study(args: argparse.Namespace) -> int:
 
     check(args.workers >= 1, f"--workers must be >= 1, got {args.workers}")
     check(100 <= args.resamples <= 100_000, f"--resamples must lie in [100, 100000], got {args.resamples}")
+    check(args.backend != "none", "--backend none is spelled --analyse-only")
     STUDY_BACKENDS.get(args.backend)  # an unknown backend lists the registered ones
     check(args.scheduler is None or args.backend == "dask", "--scheduler needs --backend dask")
     scenarios = expand_scenarios(args.scenarios)
@@ -121,7 +128,7 @@ def _study(args: argparse.Namespace) -> int:
     study = run_study(
         tasks,
         names,
-        backend=args.backend,
+        backend="none" if args.analyse_only else args.backend,
         options=options,
         groups=GroupDefinition(motorcycles=not args.motorcycles_not_vru),
         resamples=args.resamples,

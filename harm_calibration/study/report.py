@@ -58,8 +58,10 @@ def _lower(test: PairedTest | None, sign: int) -> str:
 
 
 def _describe(test: PairedTest | None, sign: int, a: str, b: str) -> str:
-    if test is None:
-        return f"{a} vs {b}: no common scenarios"
+    if test is None or test.n == 0:
+        return f"{a} vs {b}: no scenario with a value for both"
+    if test.n_nonzero == 0:
+        return f"{a} vs {b}: equal in all {test.n} scenarios"
     return (
         f"{a} vs {b}: r = {sign * test.rank_biserial:+.2f}, p(Holm) = {test.p_holm:.3g}, "
         f"n = {test.n} ({test.n_nonzero} differ)"

@@ -145,6 +145,16 @@ def _resumed(task: RunTask) -> TaskResult | None:
 STUDY_BACKENDS: Registry = Registry("study backend")
 STUDY_BACKENDS.register("process", _process_backend)
 STUDY_BACKENDS.register("dask", _dask_backend)
+#: Reads the runs already stored and runs nothing (``etp study --analyse-only``).
+STUDY_BACKENDS.register("none", _analyse_only)
+
+
+def _analyse_only(
+    tasks: Sequence[RunTask], config: RunConfig | None, options: BackendOptions
+) -> list[TaskResult]:
+    """The tasks that already have a record (nothing is run)."""
+    found = [_resumed(task) for task in tasks]
+    return [r for r in found if r is not None]
 
 
 def run_tasks(
@@ -154,6 +164,8 @@ def run_tasks(
     options: BackendOptions | None = None,
 ) -> list[TaskResult]:
     """Run (or resume) a study's tasks on ``backend``; results in task order.
+
+    Backend "none" runs nothing and returns the tasks that already have a record.
 
     Raises:
         ValueError: an unknown backend (the allowed ones listed), a scheduler with the
@@ -321,6 +333,7 @@ def run_study(
     start = time.perf_counter()
     results = run_tasks(tasks, backend, config, options)
     wall = time.perf_counter() - start
+    check(len(results) > 0, f"no run of this study is stored in {outs.copy().pop()} yet")
     paths = write_study(
         outs.pop(),
         results,

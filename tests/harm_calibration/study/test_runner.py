@@ -85,6 +85,9 @@ def test_an_interrupted_study_resumes_the_missing_runs(scenario_folder, tmp_path
     first = _study(scenario_folder, out, "process", workers=1, planners=["standard"])
     victim = first.results[0].record.run_id
     (out / victim / "summary.json").unlink()  # as if stopped before this run finished
+    stored = _study(scenario_folder, out, "none", planners=["standard"])  # --analyse-only: runs nothing
+    assert [r.record.run_id for r in stored.results] == [r.record.run_id for r in first.results[1:]]
+    assert stored.paths["report"].is_file()
     again = _study(scenario_folder, out, "process", workers=1, planners=["standard"])
     fresh = [r.record.run_id for r in again.results if not r.resumed]
     assert fresh == [victim]
@@ -117,7 +120,7 @@ def test_etp_study_command_line(scenario_folder, tmp_path, capsys):
     "argv,message",
     [
         (["nowhere_folder_xyz"], "unknown scenario 'nowhere_folder_xyz'"),
-        (["{folder}", "--backend", "ray"], "unknown study backend 'ray'; allowed: process, dask"),
+        (["{folder}", "--backend", "ray"], "unknown study backend 'ray'; allowed: process, dask, none"),
         (["{folder}", "--scheduler", "tcp://10.0.0.1:8786"], "--scheduler needs --backend dask"),
         (["{folder}", "--workers", "0"], "--workers must be >= 1"),
         (["{folder}", "--planners", "ethical,ethical"], "--planners lists ethical more than once"),
