@@ -141,20 +141,20 @@ def _resumed(task: RunTask) -> TaskResult | None:
         return None  # a damaged record is run again
 
 
-#: Study backends: name -> function(tasks, config, options) -> results in task order.
-STUDY_BACKENDS: Registry = Registry("study backend")
-STUDY_BACKENDS.register("process", _process_backend)
-STUDY_BACKENDS.register("dask", _dask_backend)
-#: Reads the runs already stored and runs nothing (``etp study --analyse-only``).
-STUDY_BACKENDS.register("none", _analyse_only)
-
-
 def _analyse_only(
     tasks: Sequence[RunTask], config: RunConfig | None, options: BackendOptions
 ) -> list[TaskResult]:
     """The tasks that already have a record (nothing is run)."""
     found = [_resumed(task) for task in tasks]
     return [r for r in found if r is not None]
+
+
+#: Study backends: name -> function(tasks, config, options) -> results in task order.
+STUDY_BACKENDS: Registry = Registry("study backend")
+STUDY_BACKENDS.register("process", _process_backend)
+STUDY_BACKENDS.register("dask", _dask_backend)
+#: Reads the runs already stored and runs nothing (``etp study --analyse-only``).
+STUDY_BACKENDS.register("none", _analyse_only)
 
 
 def run_tasks(
