@@ -282,10 +282,11 @@ def write_study(
     for scenario, reason in analysis.rejected.items():
         rejected[f"{reason} ({REJECTION_REASONS.get(reason, reason)})"].append(scenario)
     failed = sorted({r.scenario for r in runs if r.outcome == "failed" and r.rejected is None})
+    seeds = sorted({r.seed for r in runs})
     spec = [
-        f"{len(results)} runs: {len(analysis.scenarios) + len(analysis.rejected)} scenarios x "
-        f"{len(planners)} planners ({', '.join(planners)}) x seeds; {len(analysis.scenarios)} scenarios "
-        f"ran, {len(analysis.rejected)} were refused at import. {groups.describe()}.",
+        f"{len(results)} runs: {len({r.scenario for r in runs})} scenarios x {len(planners)} planners "
+        f"({', '.join(planners)}) x seeds {', '.join(map(str, seeds))}; {len(analysis.scenarios)} "
+        f"scenarios ran, {len(analysis.rejected)} were refused at import. {groups.describe()}.",
     ]
     if failed:
         spec.append(f"Runs that failed in the world (reasons in statistics.json): {', '.join(failed[:10])}.")

@@ -401,7 +401,9 @@ class RerunRecorder(RunObserver):
             )
         except (AttributeError, ValueError):  # older shapely or a degenerate area: outline only
             pass
-        rings = [np.asarray(area.exterior.coords)] + [np.asarray(r.coords) for r in area.interiors]
+        # A mapped road's drivable area may fall apart into several polygons.
+        polygons = getattr(area, "geoms", [area])
+        rings = [np.asarray(r.coords) for p in polygons for r in (p.exterior, *p.interiors)]
         rec.log(
             "world/road/boundary",
             rr.LineStrips3D([_to3(r) for r in rings], colors=[(240, 240, 240)], radii=0.08),

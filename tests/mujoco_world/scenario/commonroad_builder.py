@@ -112,11 +112,12 @@ def straight_road_file(
     dt=0.1,
     name="ZAM_Straight-1_1_T-1",
     speed_sign=None,
+    extra_lanelets=(),
 ):
     """Write the two-lane road with ``obstacles`` (dynamic), ``static`` obstacles and planning
     problems (default: one, from the right lane to a goal on the left lane); return the path."""
     scenario = Scenario(dt, ScenarioID.from_benchmark_id(name, "2020a"))
-    scenario.add_objects(road_lanelets())
+    scenario.add_objects([*road_lanelets(), *extra_lanelets])
     if speed_sign is not None:
         element = TrafficSignElement(TrafficSignIDZamunda.MAX_SPEED, [str(speed_sign)])
         sign = TrafficSign(900, [element], {1}, np.array([5.0, -4.0]))
@@ -143,6 +144,7 @@ __all__ = [
     "Circle",
     "ObstacleType",
     "Rectangle",
+    "lanelet",
     "moving_obstacle",
     "planning_problem",
     "set_based_obstacle",

@@ -24,11 +24,13 @@ from mujoco_world.scenario.commonroad import (  # noqa: E402
 from mujoco_world.scenario.commonroad_tracks import shared_commonroad  # noqa: E402
 from mujoco_world.scenario.sources import resolve_scenario  # noqa: E402
 from mujoco_world.scenario.spec import BehaviourKind, RoadKind  # noqa: E402
+from mujoco_world.storage.recording import RecorderConfig, RerunRecorder  # noqa: E402
 from tests.mujoco_world.scenario.commonroad_builder import (  # noqa: E402
     LANE,
     Circle,
     ObstacleType,
     Rectangle,
+    lanelet,
     moving_obstacle,
     planning_problem,
     set_based_obstacle,
@@ -347,3 +349,13 @@ def test_an_ego_starting_across_the_road_edge_gets_no_kerb_there(tmp_path):
     ends = sorted(x for b in right for x in (b[0][0], b[-1][0]))
     # The right edge is cut around the ego (4.5 m long, 1 m clearance): a gap from about 16.7 to 23.3 m.
     assert any(15.5 < x < 17.5 for x in ends) and any(22.5 < x < 24.5 for x in ends)
+
+
+def test_a_map_of_separate_roads_is_recorded(tmp_path):
+    # A parallel road 12 m away, not connected: the drivable area is two polygons.
+    path = straight_road_file(tmp_path, extra_lanelets=[lanelet(9, 0, 200, 12.0)])
+    scenario = import_commonroad(path)
+    assert len(World(scenario).road.drivable_area.geoms) == 2
+    recorder = RerunRecorder(tmp_path / "rec", RecorderConfig(candidates=0))
+    summary = run_scenario(replace(scenario, duration=0.2), "keep_lane", 0, observer=recorder)
+    assert summary.outcome == "timeout" and recorder.path.stat().st_size > 0
