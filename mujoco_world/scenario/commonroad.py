@@ -75,6 +75,7 @@ from mujoco_world.scenario.commonroad_tracks import (
 )
 from mujoco_world.scenario.imported import MapSpec, ObstacleSpec, RecordedTrajectory
 from mujoco_world.scenario.recorded_tracks import RecordedTracks
+from mujoco_world.scenario.road import close_union
 from mujoco_world.scenario.spec import (
     BehaviourKind,
     BehaviourSpec,
@@ -602,7 +603,7 @@ class _Importer:
         lanelets = [ll for ll in self.network.lanelets if ll.polygon.shapely_object.intersects(corridor)]
         check(bool(lanelets), "no lanelet near the ego's route")
         area = [np.asarray(ll.polygon.vertices, dtype=float) for ll in lanelets]
-        union = shapely.union_all([shapely.make_valid(Polygon(a)) for a in area])
+        union = close_union([shapely.make_valid(Polygon(a)) for a in area])
         ends = []
         for ll in lanelets:
             left, right = np.asarray(ll.left_vertices), np.asarray(ll.right_vertices)

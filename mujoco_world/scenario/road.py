@@ -9,6 +9,7 @@ to the left of a line's direction.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -217,11 +218,27 @@ def _main_line(spec: RoadSpec) -> np.ndarray:
     return _dedupe(np.concatenate(points))
 
 
+#: Gaps narrower than twice this between a map's area polygons are closed [m]: the shared
+#: edges of neighbouring lanelets often miss each other by millimetres (NGSIM), and the
+#: slivers between them would become holes lined with kerbs inside the road.
+AREA_GAP_M = 0.05
+
+
+def close_union(polygons: Sequence[Polygon], gap: float = AREA_GAP_M):  # noqa: ANN201 - a shapely geometry
+    """Union of ``polygons`` with gaps narrower than ``2 gap`` closed [m].
+
+    Each polygon grows by ``gap`` (mitred, so corners stay corners), the union shrinks
+    by ``gap`` again: wider gaps and real holes (traffic islands) stay.
+    """
+    grown = [p.buffer(gap, join_style="mitre") for p in polygons if not p.is_empty and p.area > 0]
+    return shapely.union_all(grown).buffer(-gap, join_style="mitre")
+
+
 def _map_road(spec: RoadSpec) -> RoadGeometry:
     """The geometry of a map road: the union of its area polygons, its own boundaries."""
     road_map = spec.map
     polygons = [shapely.make_valid(Polygon(ring)) for ring in road_map.area]
-    area = shapely.unary_union([p for p in polygons if not p.is_empty and p.area > 0])
+    area = close_union(polygons)
     if not isinstance(area, Polygon | MultiPolygon):
         parts = [g for g in getattr(area, "geoms", []) if isinstance(g, Polygon | MultiPolygon)]
         area = shapely.unary_union(parts)

@@ -22,6 +22,7 @@ from mujoco_world.scenario.commonroad import (  # noqa: E402
     split_reference,
 )
 from mujoco_world.scenario.commonroad_tracks import shared_commonroad  # noqa: E402
+from mujoco_world.scenario.road import close_union  # noqa: E402
 from mujoco_world.scenario.sources import resolve_scenario  # noqa: E402
 from mujoco_world.scenario.spec import BehaviourKind, RoadKind  # noqa: E402
 from mujoco_world.storage.recording import RecorderConfig, RerunRecorder  # noqa: E402
@@ -359,3 +360,25 @@ def test_a_map_of_separate_roads_is_recorded(tmp_path):
     recorder = RerunRecorder(tmp_path / "rec", RecorderConfig(candidates=0))
     summary = run_scenario(replace(scenario, duration=0.2), "keep_lane", 0, observer=recorder)
     assert summary.outcome == "timeout" and recorder.path.stat().st_size > 0
+
+
+def test_close_union_fills_slivers_between_lanelets_but_keeps_islands():
+    left = shapely.box(0.0, 0.0, 10.0, 3.5)
+    right = shapely.box(0.0, 3.52, 10.0, 7.02)  # 2 cm apart: edges that miss each other
+    merged = close_union([left, right])
+    assert merged.geom_type == "Polygon" and len(merged.interiors) == 0
+    assert merged.area == pytest.approx(10.0 * 7.02, rel=1e-6)  # the gap filled, corners kept
+    island = shapely.box(0.0, 0.0, 10.0, 10.0).difference(shapely.box(4.0, 4.0, 6.0, 6.0))
+    assert close_union([island]).area == pytest.approx(100.0 - 4.0, rel=1e-6)
+    apart = close_union([left, shapely.box(0.0, 4.0, 10.0, 7.5)])  # 0.5 m apart: two roads
+    assert apart.geom_type == "MultiPolygon"
+
+
+@needs_shared
+def test_real_ngsim_map_has_no_kerbs_inside_the_road():
+    # US101's lanelets miss each other by millimetres: without closing, 79 holes lined with kerbs.
+    scenario = import_commonroad(SHARED / "tum-cps-scenarios/hand-crafted/USA_US101-11_2_T-1.xml")
+    area = close_union([shapely.Polygon(a) for a in scenario.road.map.area])
+    assert area.geom_type == "Polygon" and len(area.interiors) == 0
+    outline = area.exterior
+    assert all(outline.distance(shapely.Point(p)) < 0.2 for b in scenario.road.map.boundaries for p in b)
