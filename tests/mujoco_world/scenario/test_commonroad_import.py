@@ -297,7 +297,7 @@ def test_references_choose_a_planning_problem_and_resolve_through_the_sources(tm
 
 REAL = [
     "drivability-checker-datasets/highD/DEU_LocationALower26-1_261353_T-1428.cr.xml",
-    "drivability-checker-datasets/SinD/CHN_SIND-7281_1_T-75.cr.xml",
+    "drivability-checker-datasets/SinD/CHN_SIND-8021_1_T-75.cr.xml",
     "drivability-checker-datasets/exiD/DEU_AachenBrand-1_431052_T-1127.cr.xml",
     "tum-cps-scenarios/NGSIM/USA_US101-21_1_T-1.xml",
     "commonroad-io-tests/USA_Peach-4_8_T-1.xml",
@@ -320,6 +320,7 @@ def test_real_recordings_replay_without_collisions_within_a_decimetre(relative):
         ("tum-cps-scenarios/ZAM_Intersect-1_1_S-1.xml", "set_based"),
         ("commonroad-io-tests/DEU_Starnberg-1_1_T-1.xml", "no_planning_problem"),
         ("tum-cps-scenarios/DEU_Muc-2_1_T-1.xml", "no_route"),
+        ("drivability-checker-datasets/SinD/CHN_SIND-7281_1_T-75.cr.xml", "ego_overlaps"),
     ],
 )
 def test_real_unusable_files_are_refused(relative, reason):
@@ -330,7 +331,7 @@ def test_real_unusable_files_are_refused(relative, reason):
 
 @needs_shared
 def test_real_sind_pedestrians_are_round_and_off_the_lanelets():
-    scenario = import_commonroad(SHARED / "drivability-checker-datasets/SinD/CHN_SIND-7281_1_T-75.cr.xml")
+    scenario = import_commonroad(SHARED / "drivability-checker-datasets/SinD/CHN_SIND-8021_1_T-75.cr.xml")
     area = shapely.union_all([shapely.Polygon(r) for r in scenario.road.map.area])
     walkers = [u for u in scenario.road_users if u.type is RoadUserType.PEDESTRIAN]
     assert walkers and all(u.length == u.width for u in walkers)
