@@ -210,6 +210,7 @@ def study_run(record: RunRecord) -> StudyRun:
         ego_risks={k: tuple(v) for k, v in s.top_ego_risks_by_type.items()},
         ego_collided=s.ego_collided,
         harms=tuple(harms),
+        avoidable=record.avoidability.avoidable if record.avoidability is not None else None,
     )
 
 
@@ -226,7 +227,9 @@ DIFFERENCES = (
     "partner) of the chosen plan of every planning cycle, as in the reference evaluation.",
     "- **Crashes per 1000 km** count runs with an ego-involved collision over the ego's "
     "distance along its route.",
-    "- **Avoidability** of crashes was not searched (no avoidability search ran on these runs).",
+    "- **Avoidability**: where `etp avoidability` has run on the study's runs (it stores its "
+    "verdict in each run record), Fig. 6 and the table split ego crashes into avoidable and "
+    "unavoidable; otherwise they are not marked.",
 )
 
 
