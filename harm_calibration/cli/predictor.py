@@ -125,6 +125,11 @@ def _data(args: argparse.Namespace) -> list[Path]:
 
 
 def _check_counts(args: argparse.Namespace) -> None:
+    # A missing weights file is named first: it is the user's typo, while a missing
+    # data folder may only mean the shared CommonRoad files are not installed here.
+    weights = getattr(args, "weights", None)
+    if weights is not None and not Path(weights).is_file():
+        raise ValueError(f"learned predictor weights {weights}: no such file")
     if args.stride < 1:
         raise ValueError(f"--stride must be >= 1, got {args.stride}")
     if args.workers < 1:
