@@ -344,7 +344,8 @@ class Scene:
     def __deepcopy__(self, memo: dict[int, object]) -> Scene:
         """An independent copy of the scene in its current state (``data`` copied).
 
-        The ``model`` is shared: nothing changes it after the scene is built. ``qpos``,
+        The ``model`` is shared: nothing changes it in place after the scene is built
+        (``set_contacts`` changes a copy of its own). ``qpos``,
         ``qvel`` and ``ctrl`` are views into ``data``; a plain deep copy would detach them
         from the copied ``data``, so they are made again from it. Stepping the copy and
         the original gives bit-identical states (tested).
@@ -367,12 +368,17 @@ class Scene:
         entered the world yet, or has left it): in the soft mode through MuJoCo's
         contact bits (explicit ``<pair>`` contacts are not filtered), in the force modes
         through the collider. Bodies out of the world are also parked far apart. (The soft
-        mode changes the shared ``model``: its forks share these bits.)
+        mode changes the contact bits in a copy of the ``model``: forks of a run share the
+        model, and one branch's bodies entering or leaving must not reach the others.)
         """
         geoms = self.geom_ids[rows]
+        contype = self._contype[rows] if enabled else 0
+        conaffinity = self._conaffinity[rows] if enabled else 0
         m = self.model
-        m.geom_contype[geoms] = self._contype[rows] if enabled else 0
-        m.geom_conaffinity[geoms] = self._conaffinity[rows] if enabled else 0
+        if np.any(m.geom_contype[geoms] != contype) or np.any(m.geom_conaffinity[geoms] != conaffinity):
+            self.model = m = copy.copy(m)  # copy on write (see __deepcopy__)
+            m.geom_contype[geoms] = contype
+            m.geom_conaffinity[geoms] = conaffinity
         self.dynamics.collider.enabled[rows] = enabled
         self.dynamics.invalidate()
 

@@ -366,3 +366,22 @@ def test_rig_bodies_skid_after_their_first_contact_like_the_world():
     # After the pulse both bodies skid at the friction limit (0.9 g), as crashed bodies in the world.
     force = np.hypot(rig.scene.ctrl[:, 0], rig.scene.ctrl[:, 1])
     np.testing.assert_allclose(force, 0.9 * 9.81 * rig.scene.masses, rtol=1e-6)
+
+
+def test_contacts_switched_in_one_fork_of_a_scene_stay_in_the_others():
+    """Forks (avoidability branches) share the MuJoCo model; soft-mode contact bits must not."""
+    import copy
+
+    scene = Scene(
+        [BodyProxy.of_type("a", "car"), BodyProxy.of_type("b", "car")],
+        contact=ContactSpec(mode=ContactMode.SOFT),
+    )
+    geom = scene.geom_ids[1]
+    before = (int(scene.model.geom_contype[geom]), int(scene.model.geom_conaffinity[geom]))
+    assert before != (0, 0)
+    fork = copy.deepcopy(scene)
+    fork.set_contacts(np.array([1]), enabled=False)
+    assert (fork.model.geom_contype[geom], fork.model.geom_conaffinity[geom]) == (0, 0)
+    assert (int(scene.model.geom_contype[geom]), int(scene.model.geom_conaffinity[geom])) == before
+    fork.set_contacts(np.array([1]), enabled=True)
+    assert (int(fork.model.geom_contype[geom]), int(fork.model.geom_conaffinity[geom])) == before
