@@ -12,6 +12,7 @@ import copy
 import math
 import time
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -139,6 +140,13 @@ class World:
         self.goal_s = ego.goal_s if ego.goal_s is not None else self.ego_path.length - 20.0
         rings = ego.goal_region
         self.goal_area = shapely.union_all([shapely.Polygon(r) for r in rings]) if rings else None
+        on_route = ego.s0 < self.goal_s <= self.ego_path.length + 1e-6
+        if scenario.road.kind is not RoadKind.MAP and not rings and not on_route:
+            raise ValueError(
+                f"ego.goal_s: the goal at s = {self.goal_s:.1f} m must lie between the ego's start "
+                f"({ego.s0:g} m) and the end of its route ({self.ego_path.length:.1f} m); the default is "
+                "20 m before the end"
+            )
         users = scenario.road_users
         recorded = [u.behaviour.kind is BehaviourKind.RECORDED for u in users]
         # A recorded body needs no route: it gets a short stand-in (shared by all of them).
@@ -165,6 +173,7 @@ class World:
             StaticBox((o.x, o.y), 0.5 * o.length, 0.5 * o.width, 0.75, o.yaw, Boundary.WALL)
             for o in scenario.obstacles
         )
+        _check_step_size(scenario, proxies, timestep)
         self.scene = Scene(proxies, statics, scenario.contact, timestep)
         self.accel_limit = self._acceleration_limits(users, recorded)
         self.recorder = ImpactRecorder(self.scene)
@@ -746,9 +755,12 @@ class World:
         if not (np.isfinite(scene.data.qpos).all() and np.isfinite(scene.data.qvel).all()):
             return "non-finite state (NaN or Inf in qpos/qvel)"
         warnings = scene.data.warning
-        bad = warnings[mujoco.mjtWarning.mjWARN_BADQACC].number
-        if bad:
-            return "MuJoCo reported a bad acceleration (mjWARN_BADQACC) and reset the state"
+        for kind, what in _UNSTABLE_WARNINGS:
+            if warnings[kind].number:
+                return f"MuJoCo warned: {what} ({kind.name})"
+        speed = float(scene.speeds().max(initial=0.0))
+        if speed > MAX_BODY_SPEED:
+            return f"a body moves at {speed:.0f} m/s (more than {MAX_BODY_SPEED:g} m/s)"
         if self.recorder.max_penetration > max_penetration:
             return f"penetration {self.recorder.max_penetration:.3f} m exceeds the bound {max_penetration} m"
         return None
@@ -756,6 +768,47 @@ class World:
 
 #: The route a recorded road user is given (it follows its recording, not a route).
 _STAND_IN_ROUTE = np.array([[0.0, 0.0], [10.0, 0.0]])
+
+
+#: MuJoCo warnings after which a run's physics is not trusted: (warning, meaning).
+_UNSTABLE_WARNINGS = (
+    (mujoco.mjtWarning.mjWARN_BADQACC, "bad acceleration, the state was reset"),
+    (mujoco.mjtWarning.mjWARN_BADQPOS, "bad position, the state was reset"),
+    (mujoco.mjtWarning.mjWARN_BADQVEL, "bad velocity, the state was reset"),
+    (mujoco.mjtWarning.mjWARN_CONTACTFULL, "too many contacts, some were dropped"),
+    (mujoco.mjtWarning.mjWARN_CNSTRFULL, "too many constraints, some were dropped"),
+)
+#: A body faster than this [m/s] means the physics has blown up (scenario speeds are <= 70 m/s).
+MAX_BODY_SPEED = 200.0
+#: Largest share of its smallest dimension a body may move in one physics step.
+MAX_STEP_FRACTION = 0.25
+
+
+def _check_step_size(scenario: Scenario, proxies: Sequence[BodyProxy], timestep: float) -> None:
+    """Refuse speeds at which a body moves more than ``MAX_STEP_FRACTION`` of its size per step.
+
+    A body that jumps a good part of its own width between two physics steps can pass
+    through another without a contact being found. The speeds checked are every
+    speed a body is given (initial, profile, desired) and, for the ego, the road's
+    speed limit it may drive at.
+
+    Raises:
+        ValueError: naming the body, its speed, the distance per step and the limit.
+    """
+    ego = scenario.ego
+    speeds = [max(ego.speed, ego.desired_speed or 0.0, scenario.road.speed_limit)]
+    for user in scenario.road_users:
+        behaviour = user.behaviour
+        speeds.append(max([behaviour.speed, *(v for _, v in behaviour.speed_profile)]))
+    for proxy, speed in zip(proxies, speeds, strict=True):
+        size = 2.0 * proxy.radius if proxy.is_round else min(proxy.length, proxy.width)
+        step = speed * timestep
+        if step > MAX_STEP_FRACTION * size:
+            raise ValueError(
+                f"{proxy.name}: at {speed:g} m/s it moves {step * 100:.1f} cm per {timestep * 1000:g} ms "
+                f"physics step, more than {MAX_STEP_FRACTION:.0%} of its size {size:g} m; lower the "
+                "speed or the physics time step"
+            )
 
 
 def _occluded(

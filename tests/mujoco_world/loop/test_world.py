@@ -2,6 +2,7 @@
 
 import math
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -229,3 +230,54 @@ def test_observed_road_users_carry_their_sampled_history():
     assert gap == pytest.approx(0.05 * user.state.v, rel=0.1, abs=0.02)
     with pytest.raises(ValueError, match="history_step"):
         World(get_scenario("highway_cut_in"), history_step=0.00015)
+
+
+def _cyclist_road(speed):
+    return scenario_from_dict(
+        {
+            "name": "fast",
+            "road": {"length": 300.0},
+            "road_users": [
+                {
+                    "name": "rider",
+                    "type": "bicycle",
+                    "s0": 60.0,
+                    "behaviour": {"kind": "scripted", "speed": speed},
+                }
+            ],
+        }
+    )
+
+
+def test_a_body_that_would_jump_a_quarter_of_its_size_per_step_is_refused():
+    # a bicycle is 0.6 m wide here: at 20 m/s it moves 2 cm per 1 ms step, 20 cm per 10 ms
+    World(_cyclist_road(20.0), timestep=0.001, history_step=0.1)
+    with pytest.raises(
+        ValueError, match=r"rider: at 20 m/s it moves 20.0 cm per 10 ms physics step, more than 25%"
+    ):
+        World(_cyclist_road(20.0), timestep=0.01, history_step=0.1)
+
+
+def test_a_goal_beyond_the_route_or_behind_the_start_is_refused():
+    with pytest.raises(ValueError, match=r"ego.goal_s: the goal at s = -5.0 m must lie between"):
+        World(
+            scenario_from_dict({"name": "short", "road": {"length": 15.0}, "ego": {"s0": 2.0, "speed": 1.0}})
+        )
+
+
+@pytest.mark.parametrize(
+    ("break_it", "message"),
+    [
+        (lambda world: world.scene.qvel.__setitem__((1, 0), 500.0), "a body moves at 500 m/s"),
+        (lambda world: world.scene.qpos.__setitem__((1, 0), math.nan), "non-finite state"),
+        (
+            lambda world: setattr(world.scene.data.warning[mujoco.mjtWarning.mjWARN_BADQACC], "number", 1),
+            "MuJoCo warned: bad acceleration",
+        ),
+    ],
+)
+def test_unstable_physics_is_reported(break_it, message):
+    world = World(_cyclist_road(5.0))
+    assert world.diverged(1.5) is None
+    break_it(world)
+    assert message in world.diverged(1.5)
