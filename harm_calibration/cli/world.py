@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 
 from ethical_planner.validation import check
@@ -78,7 +79,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run the catalog with the three planners on two cores and print a comparison",
         description="Run every catalog scenario with the ethical, selfish and standard "
         "planners (multiprocessing), one folder per run with summary.json, an "
-        "aggregate.json and a comparison table. Existing summaries are skipped (resume).",
+        "aggregate.json and a comparison table. Existing summaries are skipped (resume; "
+        "--retry-failed runs the failed ones again). A run that fails or whose worker "
+        "crashes is stored as failed and the batch goes on; Ctrl-C closes the runs in "
+        "flight as failed, writes the aggregate of what finished and exits with 130.",
     )
     p.add_argument("--out", default="logs/demo", metavar="ROOT", help="output root (default logs/demo)")
     p.add_argument("--quick", action="store_true", help="run a small subset of the catalog")
@@ -102,11 +106,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--scenario-seed", type=int, default=0, help="seed of the random variants, >= 0 (default 0)"
     )
-    p.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=2,
+        help="worker processes (default 2; 1 runs in this process, without crash isolation)",
+    )
     p.add_argument(
         "--avoidability",
         action="store_true",
         help="after the runs, search whether each ego collision was avoidable (etp avoidability)",
+    )
+    p.add_argument(
+        "--retry-failed",
+        action="store_true",
+        help="run again the runs whose stored summary says failed (default: resume skips them)",
     )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_json(p)
@@ -272,15 +286,9 @@ def _print_run(record) -> None:  # noqa: ANN001 - a RunRecord, imported lazily
         )
 
 
-def _demo(args: argparse.Namespace) -> int:
-    from mujoco_world.experiments.batch import (
-        QUICK_SCENARIOS,
-        aggregate_rows,
-        comparison_table,
-        make_tasks,
-        run_batch,
-        write_aggregate,
-    )
+def _demo_tasks(args: argparse.Namespace) -> list:
+    """The tasks of ``etp demo`` (every option checked before anything runs)."""
+    from mujoco_world.experiments.batch import QUICK_SCENARIOS, check_unique, make_tasks
     from mujoco_world.scenario.catalog import catalog_names, generated_names, get_family
     from mujoco_world.scenario.sources import resolve_scenario
 
@@ -313,25 +321,60 @@ def _demo(args: argparse.Namespace) -> int:
         scenarios = catalog_names()
     root = output_dir(args.out)
     tasks = make_tasks(scenarios, planners, seeds, root, record=not args.no_record, keep=args.keep_recordings)
-    start = time.perf_counter()
-    results = run_batch(
-        tasks,
-        workers=args.workers,
-        config=_run_config(args) if args.predictor is not None else None,
-        progress=show_progress(args),
-        worker_initializer=keep_freed_memory,
+    check_unique(tasks)
+    return tasks
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from mujoco_world.experiments.batch import (
+        BatchInterrupted,
+        aggregate_rows,
+        comparison_table,
+        run_batch,
+        write_aggregate,
     )
-    if args.avoidability:
+
+    tasks = _demo_tasks(args)
+    root = output_dir(args.out)
+    config = _run_config(args) if args.predictor is not None else None
+    start = time.perf_counter()
+    interrupted = None
+    try:
+        results = run_batch(
+            tasks,
+            workers=args.workers,
+            config=config,
+            progress=show_progress(args),
+            worker_initializer=keep_freed_memory,
+            retry_failed=args.retry_failed,
+        )
+    except BatchInterrupted as stop:
+        interrupted, results = stop, stop.results
+    if args.avoidability and interrupted is None:
         results = _search_avoidability(args, tasks, results)
     wall = time.perf_counter() - start
     path = write_aggregate(root, results, wall)
     resumed = sum(1 for r in results if r.resumed)
+    failed = sum(1 for r in results if r.record.summary.outcome == "failed")
     if args.json:
-        print_json({"runs": aggregate_rows(results), "wall_time": wall, "aggregate": str(path)})
+        data = {"runs": aggregate_rows(results), "wall_time": wall, "aggregate": str(path)}
+        print_json({**data, "interrupted": interrupted is not None, "total": len(tasks)})
     else:
         print(comparison_table(r.record for r in results))
     say(
-        args, f"\n{len(results)} runs ({resumed} resumed from existing records) in {wall:.1f} s; wrote {path}"
+        args,
+        f"\n{len(results)} runs ({resumed} resumed from existing records, {failed} failed) in "
+        f"{wall:.1f} s; wrote {path}",
     )
     say(args, f"run index: {root / 'index.jsonl'}; near-crash runs: etp near-crash {root}")
+    if interrupted is not None:
+        closed = sum(1 for r in results if r.record.summary.reason.startswith("interrupted"))
+        print(
+            f"etp demo: interrupted: {len(results) - closed} of {len(tasks)} runs finished, {closed} in "
+            f"flight closed as failed (indexed, no summary); run the same command again to resume",
+            file=sys.stderr,
+        )
+        return 130
+    if failed:
+        say(args, f"{failed} run(s) failed (see the reason column); --retry-failed runs them again")
     return 0

@@ -2,35 +2,58 @@
 
 Every run is stored by ``mujoco_world.storage.run_folder``: its record in
 ``<out>/<run id>/summary.json`` (``run_folder.run_id``), its row in
-``<out>/index.jsonl``. A run whose record exists is skipped, so an interrupted batch
-resumes where it stopped. A run that fails (in the planner, the physics, or even a
-crashed worker process) is stored as ``outcome = "failed"`` with the reason, and the
-batch goes on. Workers are started with the ``spawn`` method, so the module is safe on
-every platform. ``etp run`` is a batch of one task.
+``<out>/index.jsonl``. What a batch promises (each checked by a fault-injection test
+in ``tests/mujoco_world/experiments/test_batch_faults.py``):
+
+* A run that fails (an exception in the planner or the physics, or a worker process
+  that dies in native code or is killed) is stored as ``outcome = "failed"`` with
+  the reason, under its own run id (each worker holds one run at a time,
+  ``experiments.workers``), and the batch goes on.
+* Resume: a run whose record exists is read, not run again; ``retry_failed`` runs
+  the failed ones again.
+* Ctrl-C: nothing new starts, the runs in flight are closed as failed
+  ("interrupted ...", indexed, no record, so a rerun runs them again), and
+  ``BatchInterrupted`` carries what finished (``etp demo`` writes its aggregate and
+  exits with 130).
+* ``kill -9`` of the batch: its workers die with it; a rerun resumes.
+* The index lists every run of the batch exactly once, in the batch's order, when the
+  batch ends (also when interrupted): it is rewritten from the records
+  (``run_index.compact_index``). One batch at a time writes into an output folder
+  (``run_folder.root_lock``), and a batch whose runs share a run id is refused.
+
+Workers are started with the ``spawn`` method, so the module is safe on every
+platform. ``etp run`` is a batch of one task.
 """
 
 from __future__ import annotations
 
 import math
-import multiprocessing
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from concurrent.futures.process import BrokenProcessPool
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ethical_planner.config import PlannerConfig
 from ethical_planner.validation import check
+from mujoco_world.experiments.workers import INTERRUPTED, deferred_interrupts, run_jobs
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.observers import ObserverGroup, RunObserver
 from mujoco_world.loop.runner import RunInterrupted, run_scenario
 from mujoco_world.loop.summary import GROUPS, OUTCOMES, RunSummary
 from mujoco_world.scenario.sources import resolve_scenario
 from mujoco_world.storage.recording import RerunRecorder
-from mujoco_world.storage.run_folder import parse_keep, run_dir, run_id, source_key, source_of, store_run
-from mujoco_world.storage.run_index import NearCrashThresholds
+from mujoco_world.storage.run_folder import (
+    parse_keep,
+    root_lock,
+    run_dir,
+    run_id,
+    source_key,
+    source_of,
+    store_run,
+)
+from mujoco_world.storage.run_index import NearCrashThresholds, compact_index, make_row
 from mujoco_world.storage.run_record import RECORD_FILE, RunRecord, read_record, write_json
 
 #: Planner presets of the paper's comparison.
@@ -94,21 +117,55 @@ class TaskResult:
     resumed: bool = False
 
 
+class TaskInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a task: the run was closed as failed and indexed, without a record.
+
+    Attributes:
+        result: the failed run (a rerun of the batch runs it again).
+    """
+
+    def __init__(self, result: TaskResult) -> None:
+        super().__init__(result.record.summary.reason)
+        self.result = result
+
+
+class BatchInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a batch, after the runs in flight were closed and the index written.
+
+    Attributes:
+        results: the results that exist (finished, resumed, and the runs closed as
+            interrupted), in the order of the tasks; runs never started have none.
+        total: number of tasks of the batch.
+    """
+
+    def __init__(self, results: list[TaskResult], total: int) -> None:
+        super().__init__(f"batch interrupted after {len(results)} of {total} runs")
+        self.results = results
+        self.total = total
+
+
 def _store(task: RunTask, summary: RunSummary, config: RunConfig | None, **kwargs: Any) -> RunRecord:
-    return store_run(
-        summary,
-        task.out,
-        task.run_id,
-        scenario_source=source_of(task.scenario),
-        planner_source=source_of(task.planner),
-        config=config,
-        keep=task.keep,
-        **kwargs,
-    )
+    with deferred_interrupts():  # a Ctrl-C never splits a record from its index row
+        return store_run(
+            summary,
+            task.out,
+            task.run_id,
+            scenario_source=source_of(task.scenario),
+            planner_source=source_of(task.planner),
+            config=config,
+            keep=task.keep,
+            **kwargs,
+        )
 
 
-def store_failed(task: RunTask, reason: str) -> RunRecord:
-    """Store a run that could not produce its own summary as failed."""
+def store_failed(task: RunTask, reason: str, write: bool = True) -> RunRecord:
+    """Store a run that could not produce its own summary as failed.
+
+    Args:
+        task: the run.
+        reason: why it failed.
+        write: False indexes it without a record (an interrupted run: a rerun runs it).
+    """
     summary = RunSummary(
         scenario=source_key(task.scenario),
         planner=task.planner,
@@ -116,7 +173,7 @@ def store_failed(task: RunTask, reason: str) -> RunRecord:
         outcome="failed",
         reason=reason,
     )
-    return _store(task, summary, None)
+    return _store(task, summary, None, write=write)
 
 
 def _execute(task: RunTask, config: RunConfig | None, observers: Sequence[RunObserver]) -> RunRecord:
@@ -130,9 +187,13 @@ def _execute(task: RunTask, config: RunConfig | None, observers: Sequence[RunObs
         summary = run_scenario(scenario, planner, task.seed, config, observer)
     except RunInterrupted as interrupted:
         # Indexed as failed with its recording, but no record: a rerun runs it again.
-        _store(task, interrupted.summary, config, recording=recording, write=False)
-        raise
+        record = _store(task, interrupted.summary, config, recording=recording, write=False)
+        raise TaskInterrupted(TaskResult(record)) from None
     return _store(task, summary, config, recording=recording)
+
+
+def _interrupted(task: RunTask) -> TaskInterrupted:
+    return TaskInterrupted(TaskResult(store_failed(task, "interrupted before the run started", write=False)))
 
 
 def run_task(
@@ -140,6 +201,7 @@ def run_task(
     config: RunConfig | None = None,
     resume: bool = True,
     observers: Sequence[RunObserver] = (),
+    retry_failed: bool = False,
 ) -> TaskResult:
     """Run one task and store it (or, with ``resume``, read its existing record).
 
@@ -148,24 +210,38 @@ def run_task(
         config: loop settings.
         resume: return the existing record of the run instead of running it again.
         observers: more observers of the run (in this process), after the recorder.
+        retry_failed: with ``resume``, run a run whose record says ``failed`` again.
 
     Never raises for a failing run: the failure is stored as the run's record.
-    Ctrl-C (``RunInterrupted``) indexes the run as failed, keeps its recording but
-    writes no record (a rerun runs it again), and propagates.
+
+    Raises:
+        TaskInterrupted: Ctrl-C; the run was indexed as failed (its recording kept)
+            without a record, so a rerun runs it again.
     """
     if resume and task.record_path.exists():
         try:
-            return TaskResult(read_record(task.record_path), resumed=True)
+            record = read_record(task.record_path)
         except ValueError:
             pass  # a damaged record (or another version's) is run again
+        else:
+            if not (retry_failed and record.summary.outcome == "failed"):
+                return TaskResult(record, resumed=True)
     try:
         return TaskResult(_execute(task, config, observers))
+    except TaskInterrupted:
+        raise
+    except KeyboardInterrupt:
+        raise _interrupted(task) from None
     except Exception as error:  # noqa: BLE001 - recorded, the batch goes on
         return TaskResult(store_failed(task, f"{type(error).__name__}: {error}"))
 
 
-def _run_task_in_worker(task: RunTask, config: RunConfig | None) -> TaskResult:
-    return run_task(task, config)
+def _run_task_in_worker(job: tuple[RunTask, RunConfig | None, bool]) -> TaskResult:
+    task, config, retry_failed = job
+    try:
+        return run_task(task, config, retry_failed=retry_failed)
+    except TaskInterrupted as interrupted:
+        return interrupted.result  # the worker leaves after answering (experiments.workers)
 
 
 def make_tasks(
@@ -189,6 +265,24 @@ def make_tasks(
     ]
 
 
+def check_unique(tasks: Sequence[RunTask]) -> None:
+    """Refuse a batch in which two tasks would write one run folder.
+
+    Raises:
+        ValueError: tasks that share a run id (the same scenario file named twice, a
+            scenario listed twice); the message names them.
+    """
+    seen: dict[tuple[str, str], RunTask] = {}
+    for task in tasks:
+        key = (str(Path(task.out).resolve()), task.run_id)
+        first = seen.setdefault(key, task)
+        if first is not task:
+            raise ValueError(
+                f"tasks: {first.scenario!r} and {task.scenario!r} with planner {task.planner!r} and "
+                f"seed {task.seed} are one run ({task.run_id}); a batch runs each run once"
+            )
+
+
 def run_batch(
     tasks: Sequence[RunTask],
     workers: int = 2,
@@ -196,66 +290,81 @@ def run_batch(
     progress: bool = True,
     on_result: Callable[[TaskResult], None] | None = None,
     worker_initializer: Callable[[], object] | None = None,
+    retry_failed: bool = False,
 ) -> list[TaskResult]:
     """Run tasks on ``workers`` processes (1: in this process) and return their results.
 
     Args:
-        tasks: the runs.
-        workers: number of processes.
+        tasks: the runs (each run id once).
+        workers: number of worker processes; 1 runs in this process (no protection
+            against a crash in native code).
         config: loop settings for every run.
         progress: show a tqdm progress bar.
         on_result: called with each result as it completes.
         worker_initializer: called once in each worker process before its first run
             (the command line passes its process tuning); must be picklable.
+        retry_failed: run the runs whose stored record says ``failed`` again.
 
     Returns:
         Results in the order of ``tasks``.
+
+    Raises:
+        ValueError: tasks sharing a run id, or another batch writing to an output folder.
+        BatchInterrupted: Ctrl-C, after the runs in flight were closed as failed and
+            the index was written; it carries the results that exist.
     """
     check(isinstance(workers, int) and workers >= 1, f"workers must be >= 1, got {workers!r}")
+    check_unique(tasks)
     from tqdm import tqdm
 
     results: dict[int, TaskResult] = {}
-    bar = tqdm(total=len(tasks), disable=not progress, unit="run", dynamic_ncols=True)
+    with ExitStack() as stack:
+        for out in sorted({str(Path(t.out)) for t in tasks}):
+            stack.enter_context(root_lock(out))
+        bar = tqdm(total=len(tasks), disable=not progress, unit="run", dynamic_ncols=True)
+        stack.callback(bar.close)
 
-    def done(index: int, result: TaskResult) -> None:
-        results[index] = result
-        bar.update(1)
-        summary = result.record.summary
-        bar.set_postfix_str(f"{summary.scenario}/{summary.planner}: {summary.outcome}")
-        if on_result is not None:
-            on_result(result)
+        def done(index: int, result: TaskResult) -> None:
+            results[index] = result
+            bar.update(1)
+            summary = result.record.summary
+            bar.set_postfix_str(f"{summary.scenario}/{summary.planner}: {summary.outcome}")
+            if on_result is not None:
+                on_result(result)
 
-    pending = list(enumerate(tasks))
-    if workers == 1 or len(pending) <= 1:
-        for index, task in pending:
-            done(index, run_task(task, config))
-    else:
-        context = multiprocessing.get_context("spawn")
-        while pending:
-            with ProcessPoolExecutor(
-                max_workers=workers, mp_context=context, initializer=worker_initializer
-            ) as pool:
-                futures = {pool.submit(_run_task_in_worker, task, config): (i, task) for i, task in pending}
-                broken: list[tuple[int, RunTask]] = []
-                for future in as_completed(futures):
-                    index, task = futures[future]
+        def lost(index: int, why: str) -> None:
+            task = tasks[index]
+            if why == INTERRUPTED:
+                done(index, _interrupted(task).result)
+            else:
+                done(index, TaskResult(store_failed(task, why)))
+
+        try:
+            if workers == 1 or len(tasks) <= 1:
+                for index, task in enumerate(tasks):
                     try:
-                        done(index, future.result())
-                    except BrokenProcessPool:
-                        broken.append((index, task))
-                    except Exception as error:  # noqa: BLE001
-                        reason = f"worker raised {type(error).__name__}: {error}"
-                        done(index, TaskResult(store_failed(task, reason)))
-            pending = []
-            if broken:
-                # A worker died (e.g. a crash in native code): the first unfinished task
-                # is recorded as failed, the others are retried in a fresh pool.
-                broken.sort()
-                index, task = broken[0]
-                done(index, TaskResult(store_failed(task, "worker process died while running this task")))
-                pending = broken[1:]
-    bar.close()
+                        done(index, run_task(task, config, retry_failed=retry_failed))
+                    except TaskInterrupted as interrupted:
+                        done(index, interrupted.result)
+                        raise
+            else:
+                jobs = [(i, (task, config, retry_failed)) for i, task in enumerate(tasks)]
+                run_jobs(jobs, _run_task_in_worker, workers, done, lost, worker_initializer)
+        except KeyboardInterrupt:
+            _compact(tasks, results)
+            raise BatchInterrupted([results[i] for i in sorted(results)], len(tasks)) from None
+        _compact(tasks, results)
     return [results[i] for i in range(len(tasks))]
+
+
+def _compact(tasks: Sequence[RunTask], results: dict[int, TaskResult]) -> None:
+    """Rewrite each output folder's index: one row per run, this batch's in task order."""
+    by_out: dict[str, list[RunRecord]] = {}
+    for index in sorted(results):
+        by_out.setdefault(tasks[index].out, []).append(results[index].record)
+    with deferred_interrupts():
+        for out, records in by_out.items():
+            compact_index(out, [make_row(r) for r in records])
 
 
 # --------------------------------------------------------------------------- reporting
@@ -346,18 +455,22 @@ def _planner_totals(planner: str, records: Sequence[RunRecord]) -> str:
     counts = {o: sum(1 for s in mine if s.outcome == o) for o in OUTCOMES}
     verdicts = [_avoidable(r) for r in records]
     close = sum(1 for s in mine if _outcome_label(s) == "goal~")
-    mean_risk = {g: sum(s.max_risk.get(g, 0.0) for s in mine) / max(len(mine), 1) for g in GROUPS}
-    harm = {g: sum(s.harm_ego_involved.get(g, 0.0) for s in mine) for g in GROUPS}
+    finished = [s for s in mine if s.outcome != "failed"]  # a failed run has no risk, not 0
+    mean_risk = {g: _mean([s.max_risk.get(g, math.nan) for s in finished]) for g in GROUPS}
+    nothing = math.nan if not finished else 0.0
+    harm = {g: math.fsum(s.harm_ego_involved.get(g, 0.0) for s in finished) + nothing for g in GROUPS}
     third = sum(len(s.third_party_collisions) for s in mine)
-    third_harm = sum(sum(s.harm_third_party.values()) for s in mine)
+    third_harm = math.fsum(math.fsum(s.harm_third_party.values()) for s in finished) + nothing
     return (
         f"  {planner:<9} {len(mine):>3} runs  "
         + " ".join(f"{k} {v}" for k, v in counts.items())
         + f" (goal~ {close}; ego collisions avoidable {verdicts.count('yes')}, not avoidable "
         + f"{verdicts.count('no')}, not searched {verdicts.count('?')})  3rd-party collisions {third}"
-        + "  | max risk ego {ego:.4f} 3rd {third_party:.4f} VRU {vulnerable:.4f}".format(**mean_risk)
-        + "  | ego-involved harm ego {ego:.3f} 3rd {third_party:.3f} VRU {vulnerable:.3f}".format(**harm)
-        + f"  | 3rd-party harm {third_harm:.3f}"
+        + f"  | max risk ego {_fmt(mean_risk['ego'])} 3rd {_fmt(mean_risk['third_party'])} "
+        + f"VRU {_fmt(mean_risk['vulnerable'])}"
+        + f"  | ego-involved harm ego {_fmt(harm['ego'], 3)} 3rd {_fmt(harm['third_party'], 3)} "
+        + f"VRU {_fmt(harm['vulnerable'], 3)}"
+        + f"  | 3rd-party harm {_fmt(third_harm, 3)}"
     )
 
 
@@ -386,11 +499,18 @@ def comparison_table(records: Iterable[RunRecord]) -> str:
         "avoid: the ego collision was avoidable by an open-loop manoeuvre (etp avoidability; ?: not "
         "searched, -: no ego collision)",
         "",
-        "per planner: runs, outcomes, mean of max risk per group, summed measured harm per group",
+        "per planner: runs, outcomes; mean of max risk per group and summed measured harm per group "
+        "over the runs that did not fail",
     ]
     for planner in sorted({r.summary.planner for r in runs}):
         lines.append(_planner_totals(planner, [r for r in runs if r.summary.planner == planner]))
     return "\n".join(lines)
+
+
+def _mean(values: Sequence[float]) -> float:
+    """Mean of the finite values (nan if there is none)."""
+    finite = [v for v in values if math.isfinite(v)]
+    return math.fsum(finite) / len(finite) if finite else math.nan
 
 
 def aggregate_rows(results: Sequence[TaskResult]) -> list[dict[str, Any]]:

@@ -14,15 +14,18 @@ of its content to the planner's key.
 
 ``store_run`` writes the run's record (``run_record``), keeps or drops its recording
 (``keep``) and appends its row to ``<out>/index.jsonl`` (``run_index``), in that order.
+``root_lock`` lets one batch at a time write into an output root.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
 import os
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
 from ethical_planner.config import PRESETS, PlannerConfig, preset
@@ -34,6 +37,8 @@ from mujoco_world.storage.recording import RECORDING_FILE
 from mujoco_world.storage.run_index import INDEX_FILE, NearCrashThresholds, append_row, find_run, make_row
 from mujoco_world.storage.run_record import RunRecord, read_record, write_record
 
+#: Lock file of an output root (held by the batch writing into it).
+LOCK_FILE = ".etp-batch.lock"
 #: Allowed values of ``keep``.
 KEEP_CHOICES = ("all", "near_crash")
 #: Default output root of ``etp run``.
@@ -187,6 +192,44 @@ def store_avoidability(run_folder: str | Path, verdict: Avoidability) -> RunReco
     if (folder.parent / INDEX_FILE).is_file():
         append_row(folder.parent, make_row(record))
     return record
+
+
+@contextlib.contextmanager
+def root_lock(out: str | Path) -> Iterator[Path]:
+    """Hold the output root ``out`` for one batch (an advisory lock on ``out/LOCK_FILE``).
+
+    The lock dies with the process that holds it (a ``kill -9`` frees it). Where the
+    platform has no ``fcntl`` (Windows), nothing is locked.
+
+    Raises:
+        ValueError: another process holds the root (the message names its pid).
+    """
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - Windows
+        yield Path(out)
+        return
+    root = Path(out)
+    root.mkdir(parents=True, exist_ok=True)
+    path = root / LOCK_FILE
+    with path.open("a+", encoding="utf-8") as handle:
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            holder = handle.read().strip() or "unknown"
+            raise ValueError(
+                f"{root}: another batch (pid {holder}) is writing into this output folder; "
+                f"wait for it or choose another --out"
+            ) from None
+        handle.seek(0)
+        handle.truncate()
+        handle.write(str(os.getpid()))
+        handle.flush()
+        try:
+            yield root
+        finally:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
 
 
 def resolve_recording(run: str, root: str | Path = DEFAULT_ROOT) -> Path:

@@ -2,7 +2,8 @@
 
 Every run appends one ``IndexRow`` to ``<out_root>/index.jsonl`` (append, flush and
 fsync per row, so an interrupted batch keeps every finished run; ``read_index``
-skips a truncated or corrupt line).
+skips a truncated or corrupt line). When a batch ends it rewrites the file with one
+row per run (``compact_index``: temporary file, then rename).
 
 A row is made from the run's ``RunRecord`` (``make_row``), so the index can always be
 rebuilt from the records. Its safety metrics are the run's (``mujoco_world.loop.
@@ -48,7 +49,7 @@ import dataclasses
 import json
 import math
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -114,7 +115,8 @@ class IndexRow:
             searched, or no ego collision).
         min_ttc: [s] (inf if no approach within the horizon, nan if unknown).
         max_collision_probability: highest planned collision probability (nan if unknown).
-        max_risk: highest risk per group (ego, third_party, vulnerable).
+        max_risk: highest risk per group (ego, third_party, vulnerable; nan for a run
+            that failed before planning).
         near_crash: True if the run passes a threshold (see the module docstring).
         severity: ranking score (module docstring).
         recording: path of the ``.rrd`` file, or None if none was kept.
@@ -315,7 +317,7 @@ def make_row(record: RunRecord, thresholds: NearCrashThresholds | None = None) -
         min_distance=float(summary.min_distance),
         min_ttc=float(summary.min_ttc),
         max_collision_probability=float(summary.max_collision_probability),
-        max_risk={g: float(summary.max_risk.get(g, 0.0)) for g in GROUPS},
+        max_risk={g: float(summary.max_risk.get(g, math.nan)) for g in GROUPS},
         near_crash=near,
         severity=float(score),
         recording=record.recording,
@@ -343,6 +345,32 @@ def append_row(out_root: str | Path, row: IndexRow) -> Path:
         handle.write(row.to_json().encode() + b"\n")
         handle.flush()
         os.fsync(handle.fileno())
+    return path
+
+
+def compact_index(out_root: str | Path, rows: Sequence[IndexRow]) -> Path:
+    """Rewrite ``out_root/index.jsonl`` with one row per run id; return the file.
+
+    The runs of the file that ``rows`` does not hold come first (their latest row, in
+    the order of their first), then ``rows`` in their order (``rows`` replaces every
+    older row of its runs). Written to a temporary file, fsynced and renamed, so an
+    interruption leaves the old index or the new one.
+
+    Raises:
+        ValueError: the existing index holds a line that is not an index row.
+    """
+    root = Path(out_root)
+    path = root / INDEX_FILE
+    mine = {r.run_id for r in rows}
+    kept = [r for r in read_index(root) if r.run_id not in mine] if path.is_file() else []
+    text = "".join(r.to_json() + "\n" for r in [*kept, *rows])
+    tmp = path.with_name(path.name + ".tmp")
+    root.mkdir(parents=True, exist_ok=True)
+    with tmp.open("w", encoding="utf-8") as handle:
+        handle.write(text)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(tmp, path)
     return path
 
 
