@@ -33,6 +33,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from multiprocessing import resource_tracker
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
@@ -49,6 +50,8 @@ _MAX_IDLE_DEATHS = 3
 
 #: Set in a worker by its first SIGINT.
 _interrupted = False
+#: True in a worker while it runs a job (only then does SIGINT raise).
+_in_job = False
 
 
 @contextlib.contextmanager
@@ -103,7 +106,8 @@ def _on_sigint(signum: int, frame: object) -> None:
     if _interrupted:
         return  # the group's Ctrl-C and the parent's forwarded one: close the job once
     _interrupted = True
-    raise KeyboardInterrupt
+    if _in_job:
+        raise KeyboardInterrupt  # outside a job the flag suffices: the worker leaves
 
 
 def _worker_main(
@@ -112,29 +116,37 @@ def _worker_main(
     function: Callable[[Any], Any],
     initializer: Callable[[], object] | None,
 ) -> None:
+    global _in_job
     _die_with_parent(parent)
     signal.signal(signal.SIGINT, _on_sigint)
+    if hasattr(signal, "pthread_sigmask"):  # started with SIGINT held back (_Pool.start)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     if initializer is not None:
         initializer()
     while not _interrupted:
         try:
             job = conn.recv()
-        except (EOFError, OSError, KeyboardInterrupt):
+        except (EOFError, OSError):
             return
         if job is None:
             return
         key, item = job
-        try:
-            answer = (key, True, function(item))
-        except KeyboardInterrupt:
-            answer = (key, False, INTERRUPTED)
-        except Exception as error:  # noqa: BLE001 - reported to the parent, the batch goes on
-            answer = (key, False, f"{type(error).__name__}: {error}")
-        with deferred_interrupts():
+        if _interrupted:  # Ctrl-C reached this worker while it waited
+            answer: tuple[Any, bool, Any] = (key, False, INTERRUPTED)
+        else:
             try:
-                conn.send((*answer, _interrupted))
-            except (OSError, ValueError):
-                return
+                _in_job = True
+                answer = (key, True, function(item))
+            except KeyboardInterrupt:
+                answer = (key, False, INTERRUPTED)
+            except Exception as error:  # noqa: BLE001 - reported to the parent, the batch goes on
+                answer = (key, False, f"{type(error).__name__}: {error}")
+            finally:
+                _in_job = False
+        try:
+            conn.send((*answer, _interrupted))
+        except (OSError, ValueError):
+            return
 
 
 # --------------------------------------------------------------------------- parent side
@@ -171,7 +183,11 @@ class _Pool:
             name="etp-batch-worker",
             daemon=True,
         )
-        process.start()
+        # The worker starts with SIGINT held back until its handler is set. The resource
+        # tracker, which every spawned process needs, unblocks SIGINT when it starts: start it first.
+        resource_tracker.ensure_running()
+        with deferred_interrupts():
+            process.start()
         child_end.close()
         self.workers.append(_Worker(process, parent_end))
 

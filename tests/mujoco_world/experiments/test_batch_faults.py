@@ -126,8 +126,11 @@ def test_serial_batch_interrupted_keeps_what_finished(scenario, tmp_path):
     tasks = _tasks(scenario, tmp_path, ["keep_lane", "fault_slow", "keep_lane"], seeds=(0,))
     tasks[2] = RunTask(scenario, "keep_lane", 1, str(tmp_path), record=False)
 
+    armed = []
+
     def interrupt_soon(result):
-        signal.setitimer(signal.ITIMER_REAL, 0.3)
+        if not armed:  # once: Ctrl-C 0.3 s into the second run
+            armed.append(signal.setitimer(signal.ITIMER_REAL, 0.3))
 
     previous = signal.signal(signal.SIGALRM, lambda *_: os.kill(os.getpid(), signal.SIGINT))
     try:
