@@ -43,7 +43,7 @@ from mujoco_world.loop.observers import ObserverGroup, RunObserver
 from mujoco_world.loop.runner import RunInterrupted, run_scenario
 from mujoco_world.loop.summary import GROUPS, OUTCOMES, RunSummary
 from mujoco_world.scenario.sources import resolve_scenario
-from mujoco_world.storage.recording import RerunRecorder
+from mujoco_world.storage.recording import PARTIAL_RECORDING_FILE, RerunRecorder
 from mujoco_world.storage.run_folder import (
     parse_keep,
     root_lock,
@@ -54,7 +54,7 @@ from mujoco_world.storage.run_folder import (
     store_run,
 )
 from mujoco_world.storage.run_index import NearCrashThresholds, compact_index, make_row
-from mujoco_world.storage.run_record import RECORD_FILE, RunRecord, read_record, write_json
+from mujoco_world.storage.run_record import RECORD_FILE, RunRecord, read_record, write_json, write_text
 
 #: Planner presets of the paper's comparison.
 PLANNERS = ("ethical", "selfish", "standard")
@@ -161,6 +161,9 @@ def _store(task: RunTask, summary: RunSummary, config: RunConfig | None, **kwarg
 def store_failed(task: RunTask, reason: str, write: bool = True) -> RunRecord:
     """Store a run that could not produce its own summary as failed.
 
+    A recording its process left unfinished (``recording.partial.rrd``, a worker that
+    died) is kept as the run's recording (subject to ``task.keep``).
+
     Args:
         task: the run.
         reason: why it failed.
@@ -173,7 +176,8 @@ def store_failed(task: RunTask, reason: str, write: bool = True) -> RunRecord:
         outcome="failed",
         reason=reason,
     )
-    return _store(task, summary, None, write=write)
+    partial = task.run_dir / PARTIAL_RECORDING_FILE
+    return _store(task, summary, None, write=write, recording=partial if partial.is_file() else None)
 
 
 def _execute(task: RunTask, config: RunConfig | None, observers: Sequence[RunObserver]) -> RunRecord:
@@ -526,5 +530,5 @@ def write_aggregate(out: str | Path, results: Sequence[TaskResult], wall_time: f
         out / "aggregate.json",
         {"runs": runs, "wall_time": wall_time, "written": time.strftime("%Y-%m-%dT%H:%M:%S")},
     )
-    (out / "table.txt").write_text(comparison_table(r.record for r in results) + "\n", encoding="utf-8")
+    write_text(out / "table.txt", comparison_table(r.record for r in results) + "\n")
     return path

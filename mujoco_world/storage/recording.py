@@ -2,8 +2,12 @@
 
 ``RerunRecorder`` is a ``RunObserver``: attach it to ``run_scenario`` and it writes
 ``<out_dir>/recording.rrd`` headless through an explicit ``rr.RecordingStream`` (no
-global recording, no viewer). It flushes every ``RecorderConfig.flush_interval`` of
-simulated time, so an interrupted or failed run still leaves a readable file.
+global recording, no viewer). While the run goes on the file is
+``<out_dir>/recording.partial.rrd``; it is renamed to ``recording.rrd`` when the
+recorder closes (the run ended, also as failed or interrupted), so a file of that name
+is always complete. The stream is flushed every ``RecorderConfig.flush_interval`` of
+simulated time and at every impact, so a process that dies (a segfault, ``kill -9``)
+leaves a readable ``recording.partial.rrd`` that lacks at most that interval.
 
 Entities (all in the world frame, z up, road plane z = 0):
 
@@ -30,6 +34,7 @@ planning data.
 from __future__ import annotations
 
 import math
+import os
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,6 +68,8 @@ def _load_rerun() -> None:
 
 #: File name of a run's recording inside its output folder.
 RECORDING_FILE = "recording.rrd"
+#: Name of a recording while its run goes on (left behind by a process that died).
+PARTIAL_RECORDING_FILE = "recording.partial.rrd"
 #: RGB colour per road-user type.
 TYPE_COLORS: dict[RoadUserType, tuple[int, int, int]] = {
     RoadUserType.CAR: (70, 130, 220),
@@ -201,12 +208,14 @@ class RerunRecorder(RunObserver):
     """Writes a Rerun recording of one run (see the module docstring for its content).
 
     Args:
-        out_dir: folder of the run; the recording is ``out_dir / "recording.rrd"``.
+        out_dir: folder of the run; the recording is ``out_dir / "recording.rrd"``
+            (``recording.partial.rrd`` until the recorder closes).
         config: what to log.
         recording_id: Rerun recording id (default: the folder's name).
 
     Attributes:
-        path: the recording file.
+        path: the recording file, once the recorder is closed.
+        partial_path: the file while the run goes on.
         cycle: planning cycles seen so far.
     """
 
@@ -217,6 +226,7 @@ class RerunRecorder(RunObserver):
         self.config = config or RecorderConfig()
         self.out_dir = Path(out_dir)
         self.path = self.out_dir / RECORDING_FILE
+        self.partial_path = self.out_dir / PARTIAL_RECORDING_FILE
         self.recording_id = recording_id or self.out_dir.resolve().name
         self.rec: rr.RecordingStream | None = None
         self.cycle = 0
@@ -235,7 +245,8 @@ class RerunRecorder(RunObserver):
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.step_interval = max(int(round(1.0 / (self.config.frame_rate * world.scene.dt))), 1)
         rec = rr.RecordingStream(self.config.application_id, recording_id=self.recording_id)
-        rec.save(self.path, default_blueprint=self._blueprint(world))
+        self.path.unlink(missing_ok=True)  # an older run's complete file is not this run's
+        rec.save(self.partial_path, default_blueprint=self._blueprint(world))
         self.rec = rec
         self._world_static(world, scenario, planner, seed)
         self._bodies = _BodyLayout(world)
@@ -356,12 +367,13 @@ class RerunRecorder(RunObserver):
     # ------------------------------------------------------------------ lifecycle
 
     def close(self) -> None:
-        """Send what is buffered and close the file (idempotent)."""
+        """Send what is buffered, close the file and give it its final name (idempotent)."""
         if self.rec is None or self._closed:
             return
         self._flush()
         self.rec.disconnect()
         self._closed = True
+        os.replace(self.partial_path, self.path)
 
     def _stream(self) -> rr.RecordingStream:
         if self.rec is None:

@@ -33,7 +33,7 @@ from ethical_planner.records import to_plain
 from mujoco_world.evaluation.avoidability import Avoidability
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.summary import RunSummary
-from mujoco_world.storage.recording import RECORDING_FILE
+from mujoco_world.storage.recording import PARTIAL_RECORDING_FILE, RECORDING_FILE
 from mujoco_world.storage.run_index import INDEX_FILE, NearCrashThresholds, append_row, find_run, make_row
 from mujoco_world.storage.run_record import RunRecord, read_record, write_record
 
@@ -235,6 +235,9 @@ def root_lock(out: str | Path) -> Iterator[Path]:
 def resolve_recording(run: str, root: str | Path = DEFAULT_ROOT) -> Path:
     """The ``.rrd`` file of a run id, a run folder or a recording path.
 
+    A run folder without ``recording.rrd`` gives its ``recording.partial.rrd`` (left by
+    a process that died during the run).
+
     A run id is looked up in ``root/index.jsonl`` and in ``root/*/index.jsonl``.
 
     Raises:
@@ -243,8 +246,9 @@ def resolve_recording(run: str, root: str | Path = DEFAULT_ROOT) -> Path:
     candidate = Path(run)
     if candidate.is_file():
         return candidate
-    if candidate.is_dir() and (candidate / RECORDING_FILE).is_file():
-        return candidate / RECORDING_FILE
+    for name in (RECORDING_FILE, PARTIAL_RECORDING_FILE):
+        if candidate.is_dir() and (candidate / name).is_file():
+            return candidate / name
     root = Path(root)
     # The index of ``root`` and those one level below (``etp run`` writes logs/run/index.jsonl).
     indexes = [root / INDEX_FILE] + sorted(root.glob(f"*/{INDEX_FILE}"))

@@ -57,7 +57,7 @@ from typing import Any
 from ethical_planner.validation import check, check_positive
 from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.loop.summary import GROUPS
-from mujoco_world.storage.run_record import RunRecord
+from mujoco_world.storage.run_record import RunRecord, write_text
 
 #: File name of the index inside an output root.
 INDEX_FILE = "index.jsonl"
@@ -364,14 +364,7 @@ def compact_index(out_root: str | Path, rows: Sequence[IndexRow]) -> Path:
     mine = {r.run_id for r in rows}
     kept = [r for r in read_index(root) if r.run_id not in mine] if path.is_file() else []
     text = "".join(r.to_json() + "\n" for r in [*kept, *rows])
-    tmp = path.with_name(path.name + ".tmp")
-    root.mkdir(parents=True, exist_ok=True)
-    with tmp.open("w", encoding="utf-8") as handle:
-        handle.write(text)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
-    return path
+    return write_text(path, text)
 
 
 def read_index(out_root: str | Path) -> list[IndexRow]:

@@ -146,15 +146,32 @@ def _check_format(data: Any, where: str) -> None:
         )
 
 
-def write_json(path: str | Path, data: dict[str, Any]) -> Path:
-    """Write ``data`` to ``path`` atomically (temporary file, then rename); return the path."""
+def write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically; return the path.
+
+    The text goes to ``<path>.tmp``, is flushed to disk (fsync) and renamed over
+    ``path``: a reader sees the old file or the whole new one. If writing fails (a full
+    disk, a read-only folder), the temporary file is removed, ``path`` is left as it
+    was, and the ``OSError`` propagates.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w", encoding="utf-8") as handle:
-        json.dump(data, handle, indent=1, allow_nan=False)
-    os.replace(tmp, path)
+    try:
+        with tmp.open("w", encoding="utf-8") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return path
+
+
+def write_json(path: str | Path, data: dict[str, Any]) -> Path:
+    """Write ``data`` as JSON to ``path`` atomically (``write_text``); return the path."""
+    return write_text(path, json.dumps(data, indent=1, allow_nan=False))
 
 
 def write_record(run_dir: str | Path, record: RunRecord) -> Path:

@@ -4,6 +4,7 @@ Every check ends by comparing with a clean batch of the same runs: the same summ
 (timings aside) and the same index, one row per run.
 """
 
+import errno
 import json
 import os
 import signal
@@ -13,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+from rerun.chunk import RrdReader
 
 from harm_calibration.cli import main
 from mujoco_world.experiments.batch import (
@@ -67,7 +69,7 @@ def clean(scenario, tmp_path_factory):
 
 def test_a_crashing_worker_is_blamed_on_its_own_run_and_the_batch_goes_on(scenario, tmp_path):
     planners = ["keep_lane", "fault_segv", "fault_raise", "fault_kill"]
-    tasks = _tasks(scenario, tmp_path, planners)
+    tasks = [RunTask(scenario, p, 0, str(tmp_path)) for p in planners]  # with recordings
     results = run_batch(tasks, workers=2, progress=False, worker_initializer=faults.register)
     by_planner = {r.record.summary.planner: r.record.summary for r in results}
     assert by_planner["fault_segv"].reason == "worker process died (SIGSEGV)"
@@ -82,6 +84,12 @@ def test_a_crashing_worker_is_blamed_on_its_own_run_and_the_batch_goes_on(scenar
     rows = _index_lines(tmp_path)
     assert [r["run_id"] for r in rows] == [t.run_id for t in tasks]
     assert [r["outcome"] for r in rows] == [r.record.summary.outcome for r in results]
+    # A crashed run keeps the recording its worker left, named as partial and readable.
+    kept = results[1].record.recording
+    assert kept == str(tasks[1].run_dir / "recording.partial.rrd")
+    assert any(True for _ in RrdReader(kept).stream().to_chunks())
+    assert results[0].record.recording == str(tasks[0].run_dir / "recording.rrd")
+    assert not (tasks[0].run_dir / "recording.partial.rrd").exists()
     # A crashed run's missing risk is no number, and the healthy runs equal a run in this process.
     assert rows[1]["max_risk"] == {"ego": "nan", "third_party": "nan", "vulnerable": "nan"}
     alone = tmp_path / "alone"
@@ -208,6 +216,51 @@ def _rerun_equals_clean(scenario, out, clean, capsys):
     assert "resumed from existing records" in capsys.readouterr().out
     assert _summaries(out) == _summaries(clean)
     assert _index_lines(out) == _index_lines(clean)
+
+
+def test_an_atomic_write_that_fails_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch):
+    from mujoco_world.storage import run_record
+
+    path = run_record.write_json(tmp_path / "summary.json", {"old": 1})
+
+    def no_space(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(run_record.os, "fsync", no_space)
+    with pytest.raises(OSError, match="No space left"):
+        run_record.write_json(path, {"new": 2})
+    assert json.loads(path.read_text()) == {"old": 1}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.json"]  # no summary.json.tmp
+
+
+def test_a_full_disk_stops_the_batch_with_a_message_and_keeps_what_was_written(
+    scenario, tmp_path, monkeypatch, capsys
+):
+    from mujoco_world.storage import run_record
+
+    out = tmp_path / "out"
+    args = _demo_args(scenario, out, workers=1)
+    args[args.index("0,1,2,3")] = "0,1"
+    real = run_record.write_text
+    records = []
+
+    def full_disk(path, text):
+        if Path(path).name == "summary.json":
+            records.append(path)
+            if len(records) > 1:  # the first record fits, then the disk is full
+                raise OSError(errno.ENOSPC, "No space left on device", str(path) + ".tmp")
+        return real(path, text)
+
+    monkeypatch.setattr(run_record, "write_text", full_disk)
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert f"etp demo: error: {records[1]}.tmp: No space left on device" in err and "Traceback" not in err
+    records = sorted(out.glob("*/summary.json"))
+    assert len(records) == 1 and read_record(records[0]).summary.outcome in ("goal", "timeout")
+    monkeypatch.setattr(run_record, "write_text", real)
+    assert main(args) == 0  # space again: the rerun resumes the first run, runs the second
+    assert "1 resumed" in capsys.readouterr().out
+    assert len(read_index(out)) == 2
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc and process groups")

@@ -140,11 +140,15 @@ def test_interrupted_recording_is_readable(tmp_path):
         world.step()
         if world.scene.data.time * 1000 % recorder.step_interval < 0.5:
             recorder.on_step(world, world.time)
-    # No on_end, no close: the process could die here.
-    chunks = read_chunks(recorder.path)
+    # No on_end, no close: the process could die here. Only the partial file exists.
+    assert not recorder.path.exists()
+    chunks = read_chunks(recorder.partial_path)
     times, _ = column(chunks["/world/ego"], "Boxes3D:centers")
     assert times.max() >= 0.1
-    recorder.close()
+    recorder.close()  # the complete file takes the final name
+    assert recorder.path.is_file() and not recorder.partial_path.exists()
+    times, _ = column(read_chunks(recorder.path)["/world/ego"], "Boxes3D:centers")
+    assert times.max() >= 0.1
 
 
 def test_ellipse_strips_axes():
@@ -183,19 +187,21 @@ class Interrupt(RunObserver):
 
 def test_interrupted_run_leaves_a_recording_and_a_failed_index_row(tmp_path, monkeypatch):
     from mujoco_world.experiments import batch
-    from mujoco_world.experiments.batch import RunTask, run_task
-    from mujoco_world.loop.runner import RunInterrupted
+    from mujoco_world.experiments.batch import RunTask, TaskInterrupted, run_task
     from mujoco_world.storage.run_index import read_index
 
     scenario = dataclasses.replace(get_scenario("tailgater_sudden_stop"), duration=4.0)
     monkeypatch.setattr(batch, "resolve_scenario", lambda name: scenario)
     task = RunTask("tailgater_sudden_stop", "ethical", 0, str(tmp_path))
-    with pytest.raises(RunInterrupted) as stop:
+    with pytest.raises(TaskInterrupted) as stop:
         run_task(task, observers=[Interrupt(5)])
-    assert isinstance(stop.value, KeyboardInterrupt) and stop.value.summary.outcome == "failed"
+    summary = stop.value.result.record.summary
+    assert isinstance(stop.value, KeyboardInterrupt) and summary.outcome == "failed"
+    assert summary.reason.startswith("interrupted at t = ")
     (row,) = read_index(tmp_path)
     assert row.outcome == "failed" and row.run_id == "tailgater_sudden_stop__ethical__s0"
     assert not task.record_path.exists()  # no record: rerunning the batch runs it again
+    assert row.recording == str(task.run_dir / "recording.rrd")  # closed: the final name
     times, _ = column(read_chunks(row.recording)["/world/ego"], "Boxes3D:centers")
     assert 0.3 <= times.max() < 1.0  # what happened up to the interrupt, no more
 
