@@ -319,8 +319,8 @@ def _demo_tasks(args: argparse.Namespace) -> list:
         scenarios = list(QUICK_SCENARIOS)
     else:
         scenarios = catalog_names()
-    root = output_dir(args.out)
-    tasks = make_tasks(scenarios, planners, seeds, root, record=not args.no_record, keep=args.keep_recordings)
+    record, keep = not args.no_record, args.keep_recordings
+    tasks = make_tasks(scenarios, planners, seeds, args.out, record=record, keep=keep)
     check_unique(tasks)
     return tasks
 

@@ -63,6 +63,7 @@ CASES = [
     ("planners-empty", ["demo", "--planners", ","], {}, "--planners must name at least one item"),
     ("scenario-unknown", ["demo", "--scenarios", "nope"], {}, "nope"),
     ("scenario-twice", ["demo", "--scenarios", "{d}/s.toml,{d}/s.toml"], {"s.toml": SCENARIO}, "more than once"),
+    ("scenario-alias", ["demo", "--scenarios", "{d}/s.toml,{d}/x/../s.toml"], {"s.toml": SCENARIO, "x/.keep": ""}, "are one run"),
     ("run-unknown", ["run", "no_such_scenario"], {}, "no_such_scenario"),
     ("noise-negative", ["run", "{d}/s.toml", "--noise", "-1"], {"s.toml": SCENARIO}, "--noise must lie in [0, 10] m"),
     ("replan-zero", ["run", "{d}/s.toml", "--replan-rate", "0"], {"s.toml": SCENARIO}, "--replan-rate must lie in"),
