@@ -198,6 +198,14 @@ def _alive_in_group(pgid):
     return alive
 
 
+def _group_ends(pgid, timeout=10.0):
+    """True once no process of group ``pgid`` lives (the resource tracker leaves a moment after)."""
+    deadline = time.monotonic() + timeout
+    while _alive_in_group(pgid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return _alive_in_group(pgid) == []
+
+
 def _wait_for_rows(out, n, process, timeout=120.0):
     index = Path(out) / "index.jsonl"
     deadline = time.monotonic() + timeout
@@ -280,7 +288,7 @@ def test_ctrl_c_stops_the_batch_at_once_and_a_rerun_resumes(scenario, clean, tmp
     assert process.returncode == 130, err
     assert took < 15.0  # runs close within a planning cycle; generous for a loaded machine
     assert "Traceback" not in err and "interrupted:" in err
-    assert _alive_in_group(process.pid) == []
+    assert _group_ends(process.pid)
     aggregate = json.loads((out / "aggregate.json").read_text())
     reasons = [r["reason"] for r in aggregate["runs"]]
     assert 2 <= len(reasons) < 4 and any(r.startswith("interrupted") for r in reasons)
@@ -297,10 +305,7 @@ def test_kill_9_leaves_no_worker_and_a_rerun_gives_one_row_per_run(scenario, cle
     _wait_for_rows(out, 1, process)
     os.kill(process.pid, signal.SIGKILL)
     process.communicate(timeout=30)
-    deadline = time.monotonic() + 10.0
-    while _alive_in_group(process.pid) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert _alive_in_group(process.pid) == []  # the workers died with the parent
+    assert _group_ends(process.pid)  # the workers died with the parent
     _rerun_equals_clean(scenario, out, clean, capsys)
 
 
