@@ -86,6 +86,25 @@ class RoadUserAssessment:
     ego_responsibility: float
 
 
+@dataclass(frozen=True, slots=True)
+class LevelBest:
+    """The cheapest candidate of one validity level.
+
+    Attributes:
+        index: its index among the cycle's sampled candidates.
+        cost: its total cost: Eq. 5 on the valid level, the risk cost (Eq. 6) on the others.
+        candidate: its family and parameters.
+    """
+
+    index: int
+    cost: float
+    candidate: CandidateParameters
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able form."""
+        return {"index": self.index, "cost": self.cost, "candidate": self.candidate.to_dict()}
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class Decision:
     """Readable record of one planning cycle.
@@ -100,7 +119,10 @@ class Decision:
             preferred to the chosen valid plan: R_max decided this cycle if > 0.
         level: validity level of the chosen plan.
         level_counts: candidates per validity level.
-        invalid_counts: physically invalid candidates per broken limit.
+        invalid_counts: physically invalid candidates per broken limit (a candidate
+            may break several).
+        best_by_level: the cheapest sampled candidate of each level present, by level
+            (ties broken by comfort plus mobility, as the choice does).
         reason: why this candidate.
         emergency: True if the emergency-braking fallback was taken.
         ego_combined_risk: R_ego of the plan (Eq. 4).
@@ -123,6 +145,7 @@ class Decision:
     level: int
     level_counts: dict[int, int]
     invalid_counts: dict[str, int]
+    best_by_level: dict[int, LevelBest]
     reason: str
     emergency: bool
     ego_combined_risk: float
@@ -147,6 +170,7 @@ class Decision:
             "level": self.level,
             "level_counts": {str(k): v for k, v in self.level_counts.items()},
             "invalid_counts": dict(self.invalid_counts),
+            "best_by_level": {str(k): v.to_dict() for k, v in self.best_by_level.items()},
             "reason": self.reason,
             "emergency": self.emergency,
             "ego_combined_risk": self.ego_combined_risk,
@@ -175,6 +199,8 @@ class Decision:
             f"boundary {self.boundary_risk:.4f}",
             "  costs: " + ", ".join(f"{k} {v:.4g}" for k, v in self.costs.items()),
         ]
+        for level, best in sorted(self.best_by_level.items(), reverse=True):
+            lines.append(f"  best L{level}: {best.candidate.describe()}, cost {best.cost:.4g}")
         for u in self.road_users:
             lines.append(
                 f"  #{u.id} {u.type.value:<10} p {u.collision_probability:.4f} "
@@ -525,6 +551,7 @@ class Planner:
             level=int(chosen.levels[index]),
             level_counts={int(v): int(c) for v, c in zip(values, counts, strict=True)},
             invalid_counts={k: int(v.sum()) for k, v in grid.invalid.items()},
+            best_by_level=_best_by_level(grid),
             reason=reason,
             emergency=emergency,
             ego_combined_risk=float(risk.ego_combined[index]),
@@ -538,6 +565,17 @@ class Planner:
             candidate_levels=grid.levels,
             prediction=prediction,
         )
+
+
+def _best_by_level(grid: _Evaluation) -> dict[int, LevelBest]:
+    """The cheapest candidate of every level present (one sort, no loop over candidates)."""
+    costs = grid.costs
+    order = np.lexsort((costs.comfort + costs.mobility, costs.total, grid.levels))
+    levels, first = np.unique(grid.levels[order], return_index=True)
+    return {
+        int(level): LevelBest(int(i), float(costs.total[i]), CandidateParameters.of(grid.candidates, int(i)))
+        for level, i in zip(levels, order[first], strict=True)
+    }
 
 
 def _describe(candidates: Candidates, index: int) -> str:

@@ -48,6 +48,48 @@ def test_selfish_shifts_risk_to_the_pedestrian_where_ethical_does_not():
     assert decisions["selfish"].trajectory.y.min() < -2.0  # swerves onto the shoulder
 
 
+def test_best_candidate_of_each_level_is_the_cheapest_of_that_level():
+    """Decision.best_by_level against a plain loop over the candidates the planner evaluated."""
+    situation = overtaking_cyclist()
+    config = preset("standard").with_overrides(
+        {"sampling": {"horizons": [3.0]}, "risk": {"max_acceptable_risk": 0.01}}
+    )
+    planner = Planner(config, situation.environment)
+    grids = []
+    evaluate = planner._evaluate
+
+    def keep(*args, **kwargs):
+        grids.append(evaluate(*args, **kwargs))
+        return grids[-1]
+
+    planner._evaluate = keep
+    decision = planner.plan(situation.ego, situation.road_users)
+    grid = grids[0]
+    assert set(decision.best_by_level) == set(decision.level_counts)
+    assert {int(Validity.VALID), int(Validity.ABOVE_MAX_RISK)} <= set(decision.best_by_level)
+    for level, best in decision.best_by_level.items():
+        cheapest, key = None, None
+        for i in range(len(grid.levels)):
+            if grid.levels[i] != level:
+                continue
+            k = (grid.costs.total[i], grid.costs.comfort[i] + grid.costs.mobility[i])
+            if key is None or k < key:
+                cheapest, key = i, k
+        assert best.index == cheapest
+        assert best.cost == pytest.approx(grid.costs.total[cheapest])
+        assert best.candidate.end_offset == pytest.approx(grid.candidates.end_offset[cheapest])
+    # The first cycle has no plan to keep: the chosen plan is the best valid one.
+    assert decision.best_by_level[int(Validity.VALID)].index == decision.chosen_index
+    assert decision.best_by_level[int(Validity.VALID)].cost == pytest.approx(decision.costs["total"])
+    # Fig. 3: the best candidate R_max refused passes the cyclist; the chosen one stays behind.
+    cyclist_end_x = situation.road_users[0].state.x + 4.0 * 3.0
+    refused = decision.best_by_level[int(Validity.ABOVE_MAX_RISK)]
+    assert decision.candidate_x[refused.index, -1] > cyclist_end_x
+    assert decision.trajectory.x[-1] < cyclist_end_x
+    record = json.loads(json.dumps(decision.to_dict()))
+    assert set(record["best_by_level"]) == {str(k) for k in decision.level_counts}
+
+
 def test_empty_road_has_zero_risk_and_a_valid_plan():
     env = RoadEnvironment.along_path([[-20, 0], [300, 0]], lanes_left=1)
     decision = Planner(preset("ethical"), env).plan(KinematicState(0, 0, 0, 10), [])
