@@ -29,6 +29,8 @@ COST = "ethical_planner/cost.py"
 TEST_VALIDITY = "tests/ethical_planner/test_validity.py"
 TEST_COST = "tests/ethical_planner/test_cost.py"
 TEST_PLANNER = "tests/ethical_planner/test_planner.py"
+RECORDING = "mujoco_world/storage/recording.py"
+TEST_RECORDING = "tests/mujoco_world/storage/test_recording.py"
 
 
 @dataclass(frozen=True)
@@ -188,6 +190,43 @@ MUTANTS = (
         "np.where(valid, weights.risk * j_risk + comfort + mobility, j_risk)",
         "weights.risk * j_risk + comfort + mobility",
         (TEST_COST,),
+    ),
+    # --- the best candidate of each level (Decision.best_by_level)
+    Mutant(
+        "best_is_dearest",
+        "ethical_planner/planner.py",
+        "costs.comfort + costs.mobility, costs.total, grid.levels",
+        "costs.comfort + costs.mobility, -costs.total, grid.levels",
+        (TEST_PLANNER,),
+    ),
+    # --- what a recording shows of each decision and moment
+    *(
+        Mutant(name, RECORDING, old, new, (TEST_RECORDING,))
+        for name, old, new in (
+            (
+                "rejected_level_mixed_up",
+                "float(counts.get(int(level), 0))",
+                "float(counts.get(int(level) ^ 3, 0))",
+            ),
+            ("refused_dropped", "float(decision.max_risk_refused)", "0.0"),
+            ("best_cost_of_chosen", "math.nan if best is None else best.cost", "decision.costs['total']"),
+            ("chosen_offset_at_start", '("end_offset", chosen.end_offset)', '("end_offset", 0.0)'),
+            ("switch_inverted", "self._decisions > 0 and not decision.continued", "decision.continued"),
+            ("switch_on_first", "self._decisions > 0 and not decision.continued", "not decision.continued"),
+            ("speed_of_user", "world.speeds_along_heading()[0]", "world.speeds_along_heading()[-1]"),
+            (
+                "acceleration_sign",
+                "world.accelerations_along_heading()[0]",
+                "-world.accelerations_along_heading()[0]",
+            ),
+            ("ttc_not_masked", "present & np.isfinite(ttc), ttc", "present, ttc"),
+            ("distance_uncapped", "present & (distance < DISTANCE_CAP)", "present"),
+            (
+                "visible_is_present",
+                "np.where(present, world.visible()[1:], math.nan)",
+                "present.astype(float)",
+            ),
+        )
     ),
 )
 

@@ -28,6 +28,7 @@ from mujoco_world.evaluation.safety import time_to_collision
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.state import RunState
 from mujoco_world.loop.summary import GROUPS
+from mujoco_world.loop.world import World
 
 #: Number of highest risk values kept per group (paper Fig. 5 uses 100).
 TOP_RISKS = 100
@@ -223,6 +224,30 @@ class MinDistance(Metric):
         }
 
 
+def footprint_extents(world: World) -> np.ndarray:
+    """(n, 2) length and width of every body's footprint [m]; a round body as its bounding square."""
+    bodies = world.scene.bodies
+    length = np.array([2 * b.radius if b.is_round else b.length for b in bodies])
+    width = np.array([2 * b.radius if b.is_round else b.width for b in bodies])
+    return np.column_stack([length, width])
+
+
+def ego_time_to_collision(world: World, extent: np.ndarray, horizon: float) -> np.ndarray:
+    """Constant-velocity time to collision of the ego with every road user, from the true state.
+
+    Args:
+        world: the world now.
+        extent: (n, 2) footprints [m] (``footprint_extents``).
+        horizon: look-ahead [s].
+
+    Returns:
+        (n - 1,) [s]: 0 if overlapping now, inf if no overlap within ``horizon``.
+    """
+    qpos, qvel = world.scene.qpos, world.scene.qvel
+    states = np.column_stack([qpos[:, :2], qpos[:, 2], qvel[:, :2], extent])
+    return time_to_collision(states[0], states[1:], horizon)
+
+
 class TimeToCollision(Metric):
     """Smallest constant-velocity time-to-collision of the ego until its first contact.
 
@@ -243,10 +268,7 @@ class TimeToCollision(Metric):
     def start(self, run: RunState) -> None:
         """Footprints once, then the TTC of the initial state."""
         self.interval = max(int(round(1.0 / (self.rate * run.dt))), 1)
-        bodies = run.world.scene.bodies
-        length = np.array([2 * b.radius if b.is_round else b.length for b in bodies])
-        width = np.array([2 * b.radius if b.is_round else b.width for b in bodies])
-        self._extent = np.column_stack([length, width])
+        self._extent = footprint_extents(run.world)
         self.lowest = math.inf
         self.sample(run)
 
@@ -255,9 +277,7 @@ class TimeToCollision(Metric):
         world = run.world
         if world.n < 2 or world.crashed[0]:
             return
-        qpos, qvel = world.scene.qpos, world.scene.qvel
-        states = np.column_stack([qpos[:, :2], qpos[:, 2], qvel[:, :2], self._extent])
-        ttc = time_to_collision(states[0], states[1:], self.horizon)
+        ttc = ego_time_to_collision(world, self._extent, self.horizon)
         self.lowest = min(self.lowest, float(ttc.min()))
 
     def values(self, run: RunState) -> dict[str, Any]:

@@ -21,8 +21,42 @@ Entities (all in the world frame, z up, road plane z = 0):
 * ``series/{risk,collision_probability,harm}/user_<id>``, ``series/ego/{risk,
   max_acceptable_risk}``, ``series/cost/<term>``, ``series/planning_ms`` and
   ``series/level``, on the ``sim_time`` and ``cycle`` timelines, sent in columns.
+* Why this plan, per planning cycle (``sim_time`` and ``cycle``):
+
+  - ``series/candidates/{total,valid}`` and ``series/rejected/<level>`` with
+    <level> one of ``physically_invalid``, ``collision``, ``leaves_road``,
+    ``above_max_risk``: candidates per validity level (they add up to ``total``);
+    ``series/rejected/limit/<limit>``: candidates breaking each physical limit
+    (``speed``, ``acceleration``, ``curvature``, ``lateral_acceleration``,
+    ``friction``; one candidate may break several); ``series/rejected/
+    max_risk_refused``: candidates above R_max that Eq. 5 would have preferred
+    to the chosen one (R_max decided the cycle if > 0).
+  - ``series/best_cost/<level>`` (``valid`` and the four above): the cost of the
+    cheapest candidate of each level (Eq. 5 on ``valid``, Eq. 6 below; nan if the
+    level is empty) and ``world/plan/best/<level>``: its path, labelled with its
+    family, parameters and cost.
+  - ``series/chosen/{horizon,end_speed,end_offset,deceleration,family}``: the
+    chosen candidate's parameters [s, m/s, m, m/s^2; family: ``CandidateKind``
+    value, 0 grid, 1 brake, 2 continuation, 3 emergency].
+  - ``series/plan_switch``: 1 when the chosen plan is not the continuation of the
+    previous cycle's plan (0 in the first cycle).
+* The moment, at the frame rate (``sim_time``): ``series/motion/{speed,
+  acceleration}`` of the ego along its heading [m/s, m/s^2]; per road user
+  ``series/ttc/user_<id>`` (constant-velocity time to collision from the true
+  state [s]; nan if none within ``RecorderConfig.ttc_horizon``),
+  ``series/distance/user_<id>`` (geom distance to the ego [m]; nan beyond 50 m)
+  and ``series/visible/user_<id>`` (1 if the ego perceives it, 0 if it is out of
+  sensor range or occluded; nan while it is not in the world). A road user with
+  no value in a flush interval is not written for that interval.
 * ``world/impacts/<n>/{point,force}`` and ``impacts/<n>/<body>/{dv_measured,
   dv_predicted,harm_measured,harm_predicted}``, plus an ``impacts`` TextLog.
+
+The default blueprint shows a top-down view that follows the ego
+(``EyeControls3D.tracking_entity = world/ego`` at ``RecorderConfig.follow_height``;
+an ``overview`` tab shows the whole road), the decision log below it and three
+tabbed groups of plots on the right: risks and costs; rejected candidates, best
+cost per level, chosen candidate, plan switch; time to collision, distance,
+visibility, ego speed and acceleration.
 
 Rerun is imported when the first ``RerunRecorder`` is built, not with this module,
 so the layering check (``mujoco_world`` pulls in no rerun on import) holds.
@@ -45,9 +79,12 @@ import shapely
 
 from ethical_planner.planner import Decision
 from ethical_planner.road_users import RoadUserType
+from ethical_planner.sampling import CandidateKind
 from ethical_planner.validation import check
+from ethical_planner.validity import LIMITS, Validity
 from mujoco_world.agents.ego_planner import Plan
 from mujoco_world.evaluation.compare import ImpactRecord
+from mujoco_world.loop.metrics import DISTANCE_CAP, ego_time_to_collision, footprint_extents
 from mujoco_world.loop.observers import RunObserver
 from mujoco_world.loop.summary import RunSummary
 from mujoco_world.loop.world import World
@@ -106,6 +143,9 @@ class RecorderConfig:
         prediction_stride: every how many prediction steps an ellipse is drawn (>= 1).
         flush_interval: simulated time between flushes of the file [s].
         application_id: Rerun application id.
+        ttc_horizon: look-ahead of the logged time to collision [s] (longer: not logged).
+        follow_height: height of the eye of the view that follows the ego [m] (about
+            1.2 times the stretch of road it shows).
     """
 
     frame_rate: float = 20.0
@@ -113,6 +153,8 @@ class RecorderConfig:
     prediction_stride: int = 5
     flush_interval: float = 1.0
     application_id: str = "ethical_trajectory_planning"
+    ttc_horizon: float = 10.0
+    follow_height: float = 45.0
 
     def __post_init__(self) -> None:
         check(
@@ -134,6 +176,18 @@ class RecorderConfig:
             f"recorder.flush_interval must be > 0 s, got {self.flush_interval!r}",
         )
         check(bool(self.application_id), "recorder.application_id must be a non-empty string")
+        check(
+            isinstance(self.ttc_horizon, int | float)
+            and math.isfinite(self.ttc_horizon)
+            and self.ttc_horizon > 0,
+            f"recorder.ttc_horizon must be a finite number > 0 s, got {self.ttc_horizon!r}",
+        )
+        check(
+            isinstance(self.follow_height, int | float)
+            and math.isfinite(self.follow_height)
+            and self.follow_height > 0,
+            f"recorder.follow_height must be a finite number > 0 m, got {self.follow_height!r}",
+        )
 
 
 def yaw_quaternions(yaw: np.ndarray) -> np.ndarray:
@@ -171,6 +225,19 @@ def _rgb(t: RoadUserType) -> tuple[int, int, int]:
     return TYPE_COLORS.get(t, (200, 200, 200))
 
 
+#: Validity levels whose candidates were not chosen for a reason, logged under ``series/rejected``.
+REJECTED_LEVELS = (
+    Validity.PHYSICALLY_INVALID,
+    Validity.COLLISION,
+    Validity.LEAVES_ROAD,
+    Validity.ABOVE_MAX_RISK,
+)
+
+
+def _level_name(level: int) -> str:
+    return Validity(level).name.lower()
+
+
 def _finite(value: float) -> float:
     return float(value) if math.isfinite(value) else math.nan
 
@@ -182,13 +249,29 @@ class _SeriesBuffer:
         self.time: dict[str, list[float]] = defaultdict(list)
         self.cycle: dict[str, list[int]] = defaultdict(list)
         self.value: dict[str, list[float]] = defaultdict(list)
+        self.rows: dict[str, tuple[list[float], list[np.ndarray]]] = {}
 
     def add(self, path: str, t: float, cycle: int | None, value: float) -> None:
         self.time[path].append(t)
         self.cycle[path].append(-1 if cycle is None else cycle)
         self.value[path].append(float(value))
 
+    def add_row(self, prefix: str, t: float, values: np.ndarray) -> None:
+        """One value per road user at ``t``: entity ``<prefix>/user_<i>`` gets ``values[i - 1]``."""
+        times, rows = self.rows.setdefault(prefix, ([], []))
+        times.append(t)
+        rows.append(np.asarray(values, dtype=float))
+
     def send(self, rec: rr.RecordingStream) -> None:
+        for prefix, (times, rows) in self.rows.items():
+            table = np.vstack(rows)  # (frames, road users)
+            index = [rr.TimeColumn("sim_time", duration=np.asarray(times))]
+            # Road users without a single value in this window (absent, out of range) are left out.
+            for j in np.flatnonzero(np.isfinite(table).any(axis=0)):
+                rec.send_columns(
+                    f"{prefix}/user_{j + 1}", indexes=index, columns=rr.Scalars.columns(scalars=table[:, j])
+                )
+        self.rows.clear()
         for path, times in self.time.items():
             if not times:
                 continue
@@ -235,6 +318,7 @@ class RerunRecorder(RunObserver):
         self._path_xy: list[np.ndarray] = []
         self._next_flush = 0.0
         self._impacts = 0
+        self._decisions = 0
         self._rng = np.random.default_rng(0)  # candidate subsampling only, fixed for reproducibility
         self._closed = False
 
@@ -250,9 +334,11 @@ class RerunRecorder(RunObserver):
         self.rec = rec
         self._world_static(world, scenario, planner, seed)
         self._bodies = _BodyLayout(world)
+        self._extent = footprint_extents(world)
         self._log_body_shapes()
         rec.set_time("sim_time", duration=world.time)
         self._log_bodies(world)
+        self._log_state_series(world, world.time)
         self._next_flush = world.time + self.config.flush_interval
         rec.flush()
 
@@ -262,6 +348,7 @@ class RerunRecorder(RunObserver):
             return
         self.rec.set_time("sim_time", duration=time)
         self._log_bodies(world)
+        self._log_state_series(world, time)
         if time >= self._next_flush:
             self._flush()
             self._next_flush = time + self.config.flush_interval
@@ -302,6 +389,56 @@ class RerunRecorder(RunObserver):
                 s.add(f"series/cost/{name}", time, c, value)
         s.add("series/planning_ms", time, c, float(sum(decision.timings_ms.values())))
         s.add("series/level", time, c, float(decision.level))
+        self._log_rejections(decision, time)
+        self._log_best(decision, time)
+        chosen = decision.candidate
+        for name, value in (
+            ("horizon", chosen.horizon),
+            ("end_speed", chosen.end_speed),
+            ("end_offset", chosen.end_offset),
+            ("deceleration", chosen.deceleration),
+            ("family", float(chosen.kind)),
+        ):
+            s.add(f"series/chosen/{name}", time, c, value)
+        # A plan switch: a plan existed and the chosen one is not its continuation.
+        s.add("series/plan_switch", time, c, float(self._decisions > 0 and not decision.continued))
+        self._decisions += 1
+
+    def _log_rejections(self, decision: Decision, time: float) -> None:
+        """Candidates per validity level (they sum to ``total``) and per broken physical limit."""
+        s, c = self._series, self.cycle
+        counts = decision.level_counts
+        s.add("series/candidates/total", time, c, float(len(decision.candidate_levels)))
+        s.add("series/candidates/valid", time, c, float(counts.get(int(Validity.VALID), 0)))
+        for level in REJECTED_LEVELS:
+            s.add(f"series/rejected/{_level_name(level)}", time, c, float(counts.get(int(level), 0)))
+        s.add("series/rejected/max_risk_refused", time, c, float(decision.max_risk_refused))
+        for limit in LIMITS:
+            s.add(f"series/rejected/limit/{limit}", time, c, float(decision.invalid_counts.get(limit, 0)))
+
+    def _log_best(self, decision: Decision, time: float) -> None:
+        """The cheapest candidate of every level: its cost as a series, its path in the scene."""
+        rec, s, c = self._stream(), self._series, self.cycle
+        cx, cy = decision.candidate_x, decision.candidate_y
+        for level in Validity:
+            name = _level_name(level)
+            best = decision.best_by_level.get(int(level))
+            s.add(f"series/best_cost/{name}", time, c, math.nan if best is None else best.cost)
+            path = f"world/plan/best/{name}"
+            if best is None:
+                rec.log(path, rr.Clear(recursive=False))
+                continue
+            color = LEVEL_COLORS[int(level)][:3]
+            rec.log(
+                path,
+                rr.LineStrips3D(
+                    [_to3(np.column_stack([cx[best.index], cy[best.index]]), 1.5 * _Z_LINE)],
+                    colors=[color],
+                    radii=0.06,
+                    labels=[f"best {name}: {best.candidate.describe()}, cost {best.cost:.4g}"],
+                    show_labels=False,
+                ),
+            )
 
     def on_impact(self, record: ImpactRecord) -> None:
         """Log the contact point, the force arrow, delta-v and harm (measured and predicted)."""
@@ -460,8 +597,20 @@ class RerunRecorder(RunObserver):
         for i in range(1, world.n):
             name = f"{world.types[i].value} #{i}"
             color = _rgb(world.types[i])
-            for kind in ("risk", "collision_probability", "harm"):
+            for kind in ("risk", "collision_probability", "harm", "ttc", "distance", "visible"):
                 rec.log(f"series/{kind}/user_{i}", rr.SeriesLines(colors=[color], names=[name]), static=True)
+        for level in Validity:
+            color = LEVEL_COLORS[int(level)][:3]
+            name = _level_name(level)
+            rec.log(f"series/best_cost/{name}", rr.SeriesLines(colors=[color], names=[name]), static=True)
+            if level in REJECTED_LEVELS:
+                rec.log(f"series/rejected/{name}", rr.SeriesLines(colors=[color], names=[name]), static=True)
+        families = ", ".join(f"{k.value} {k.name.lower()}" for k in CandidateKind)
+        rec.log(
+            "series/chosen/family",
+            rr.SeriesPoints(names=[f"family ({families})"], marker_sizes=[3.0]),
+            static=True,
+        )
 
     def _log_body_shapes(self) -> None:
         """Sizes, colours and labels once, as static data; frames then carry poses only."""
@@ -519,6 +668,20 @@ class RerunRecorder(RunObserver):
         if len(round_):
             rec.log("world/road_users/round", rr.Cylinders3D.from_fields(centers=centers[round_]))
 
+    def _log_state_series(self, world: World, time: float) -> None:
+        """Ego speed and acceleration; TTC, distance and visibility of every road user."""
+        s = self._series
+        s.add("series/motion/speed", time, None, float(world.speeds_along_heading()[0]))
+        s.add("series/motion/acceleration", time, None, float(world.accelerations_along_heading()[0]))
+        if world.n < 2:
+            return
+        present = world.present[1:]
+        ttc = ego_time_to_collision(world, self._extent, self.config.ttc_horizon)
+        s.add_row("series/ttc", time, np.where(present & np.isfinite(ttc), ttc, math.nan))
+        distance = world.ego_distances(DISTANCE_CAP)
+        s.add_row("series/distance", time, np.where(present & (distance < DISTANCE_CAP), distance, math.nan))
+        s.add_row("series/visible", time, np.where(present, world.visible()[1:], math.nan))
+
     def _log_candidates(self, decision: Decision) -> None:
         rec = self._stream()
         cx, cy = decision.candidate_x, decision.candidate_y
@@ -575,28 +738,56 @@ class RerunRecorder(RunObserver):
         hi = np.asarray(world.road.drivable_area.bounds[2:])
         centre = 0.5 * (lo + hi)
         height = float(max(hi - lo)) * 0.9 + 10.0
-        view = rrb.Spatial3DView(
+        overview = rrb.Spatial3DView(
             origin="world",
-            name="top-down",
+            name="overview",
             eye_controls=rrb.EyeControls3D(
                 position=[float(centre[0]), float(centre[1]) - 1.0, height],
                 look_target=[float(centre[0]), float(centre[1]), 0.0],
                 eye_up=[0.0, 0.0, 1.0],
             ),
         )
+        # The ego view keeps the eye at its offset from the ego while the ego moves.
+        ego = np.asarray(world.positions[0], dtype=float)
+        follow = rrb.Spatial3DView(
+            origin="world",
+            name="top-down (follows the ego)",
+            eye_controls=rrb.EyeControls3D(
+                position=[float(ego[0]), float(ego[1]) - 1.0, self.config.follow_height],
+                look_target=[float(ego[0]), float(ego[1]), 0.0],
+                eye_up=[0.0, 0.0, 1.0],
+                tracking_entity="world/ego",
+            ),
+        )
         return rrb.Blueprint(
             rrb.Horizontal(
                 rrb.Vertical(
-                    view,
+                    rrb.Tabs(follow, overview, name="scene"),
                     rrb.TextLogView(origin="/", contents=["decision", "impacts"], name="decisions"),
                     row_shares=[3, 1],
                 ),
                 rrb.Vertical(
-                    rrb.TimeSeriesView(origin="series/risk", name="risk per road user"),
-                    rrb.TimeSeriesView(origin="series/collision_probability", name="collision probability"),
-                    rrb.TimeSeriesView(origin="series/ego", name="ego risk vs R_max"),
-                    rrb.TimeSeriesView(origin="series/cost", name="principle costs"),
-                    rrb.TimeSeriesView(origin="series/planning_ms", name="planning time [ms]"),
+                    rrb.Tabs(
+                        rrb.TimeSeriesView(origin="series/risk", name="risk per road user"),
+                        rrb.TimeSeriesView(
+                            origin="series/collision_probability", name="collision probability"
+                        ),
+                        rrb.TimeSeriesView(origin="series/ego", name="ego risk vs R_max"),
+                        rrb.TimeSeriesView(origin="series/cost", name="principle costs"),
+                        rrb.TimeSeriesView(origin="series/planning_ms", name="planning time [ms]"),
+                    ),
+                    rrb.Tabs(
+                        rrb.TimeSeriesView(origin="series/rejected", name="rejected candidates"),
+                        rrb.TimeSeriesView(origin="series/best_cost", name="best cost per level"),
+                        rrb.TimeSeriesView(origin="series/chosen", name="chosen candidate"),
+                        rrb.TimeSeriesView(origin="series/plan_switch", name="plan switch"),
+                    ),
+                    rrb.Tabs(
+                        rrb.TimeSeriesView(origin="series/ttc", name="time to collision [s]"),
+                        rrb.TimeSeriesView(origin="series/distance", name="distance [m]"),
+                        rrb.TimeSeriesView(origin="series/visible", name="visible"),
+                        rrb.TimeSeriesView(origin="series/motion", name="ego speed and acceleration"),
+                    ),
                 ),
                 column_shares=[3, 2],
             ),

@@ -9,10 +9,16 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
+from ethical_planner.config import preset
+from ethical_planner.sampling import CandidateKind
+from ethical_planner.validity import LIMITS, Validity
 from mujoco_world.loop.runner import ObserverGroup, RunObserver, run_scenario
 from mujoco_world.loop.world import World
 from mujoco_world.scenario.catalog import get_scenario
 from mujoco_world.storage.recording import RecorderConfig, RerunRecorder, ellipse_strips
+
+#: Rejected candidates per validity level: entity name -> level.
+REJECTED = {"physically_invalid": 0, "collision": 1, "leaves_road": 2, "above_max_risk": 3}
 
 
 def read_chunks(path):
@@ -214,3 +220,235 @@ def test_a_planner_without_decisions_is_recorded_with_its_plans(tmp_path):
     times, _ = column(chunks["/world/plan/chosen"], "LineStrips3D:strips")
     assert len(times) == summary.cycles == 10
     assert "/world/plan/candidates" not in chunks and "/world/prediction/means" not in chunks
+
+
+# ---------------------------------------------------------------- recordings explain the decision
+
+
+class Probe(RunObserver):
+    """Keeps every decision and the ego's true position at the recorder's frames."""
+
+    step_interval = 50  # 20 Hz at dt = 1 ms, the recorder's interval
+
+    def __init__(self):
+        self.decisions, self.cycle_times, self.frames = [], [], []
+
+    def on_start(self, world, scenario, planner, seed):
+        self.world = world
+        self.frames.append((world.time, world.positions[0].copy(), world.yaws[0]))
+
+    def on_step(self, world, time):
+        self.frames.append((time, world.positions[0].copy(), world.yaws[0]))
+
+    def on_cycle(self, plan, time):
+        self.decisions.append(plan.decision)
+        self.cycle_times.append(time)
+
+
+@pytest.fixture(scope="module")
+def hidden_pedestrian_run(tmp_path_factory):
+    # The pedestrian stays hidden behind the parked van (occlusion on) until about 4.1 s.
+    out = tmp_path_factory.mktemp("runs") / "hidden-pedestrian"
+    scenario = dataclasses.replace(get_scenario("pedestrian_behind_parked"), duration=5.0)
+    recorder = RerunRecorder(out, RecorderConfig(candidates=0))
+    probe = Probe()
+    summary = run_scenario(scenario, "ethical", 0, observer=ObserverGroup([recorder, probe]))
+    return summary, probe, read_chunks(recorder.path)
+
+
+def per_cycle(chunks, path):
+    """Values of a per-cycle series, one per planning cycle (the static style row has none)."""
+    _, values = column(chunks[path], "Scalars:scalars")
+    return np.array([v[0] for v in values if v])
+
+
+def test_rejected_candidates_per_level_add_up_to_every_candidate(hidden_pedestrian_run):
+    _, probe, chunks = hidden_pedestrian_run
+    levels = {name: per_cycle(chunks, f"/series/rejected/{name}") for name in REJECTED}
+    valid = per_cycle(chunks, "/series/candidates/valid")
+    total = per_cycle(chunks, "/series/candidates/total")
+    assert len(total) == len(probe.decisions) > 10
+    assert np.array_equal(sum(levels.values()) + valid, total)
+    for c, decision in enumerate(probe.decisions):
+        by_level = np.bincount(np.asarray(decision.candidate_levels), minlength=11)
+        assert total[c] == len(decision.candidate_levels)
+        assert valid[c] == by_level[10]
+        for name, level in REJECTED.items():
+            assert levels[name][c] == by_level[level], (name, c)
+    limits = {name: per_cycle(chunks, f"/series/rejected/limit/{name}") for name in LIMITS}
+    # A candidate may break several limits: each limit's count is at most the level-0 count,
+    # and together they cover it.
+    assert all(np.all(v <= levels["physically_invalid"]) for v in limits.values())
+    assert np.all(sum(limits.values()) >= levels["physically_invalid"])
+    assert levels["physically_invalid"].max() > 0
+    refused = per_cycle(chunks, "/series/rejected/max_risk_refused")
+    assert np.array_equal(refused, [d.max_risk_refused for d in probe.decisions])
+
+
+def test_best_cost_of_each_level_is_logged_and_bounds_the_chosen_plan(hidden_pedestrian_run):
+    _, probe, chunks = hidden_pedestrian_run
+    for name, level in {**REJECTED, "valid": 10}.items():
+        best = per_cycle(chunks, f"/series/best_cost/{name}")
+        assert len(best) == len(probe.decisions)
+        for c, decision in enumerate(probe.decisions):
+            present = np.any(np.asarray(decision.candidate_levels) == level)
+            assert np.isfinite(best[c]) == present, (name, c)
+            if decision.level == level and decision.chosen_index >= 0:
+                # The chosen plan is a candidate of its level: the best of the level is no dearer.
+                assert best[c] <= decision.costs["total"] + 1e-9
+                if not decision.continued:
+                    assert best[c] == pytest.approx(decision.costs["total"])
+    _, strips = column(chunks["/world/plan/best/valid"], "LineStrips3D:strips")
+    decision = probe.decisions[-1]
+    if int(Validity.VALID) in decision.best_by_level:
+        index = decision.best_by_level[int(Validity.VALID)].index
+        last = np.asarray(strips[-1][0])
+        assert last[:, 0] == pytest.approx(decision.candidate_x[index])
+        assert last[:, 1] == pytest.approx(decision.candidate_y[index])
+
+
+def test_chosen_candidate_parameters_match_the_executed_plan(hidden_pedestrian_run):
+    _, probe, chunks = hidden_pedestrian_run
+    end_speed = per_cycle(chunks, "/series/chosen/end_speed")
+    end_offset = per_cycle(chunks, "/series/chosen/end_offset")
+    horizon = per_cycle(chunks, "/series/chosen/horizon")
+    family = per_cycle(chunks, "/series/chosen/family")
+    path = probe.world.ego_path
+    for c, decision in enumerate(probe.decisions):
+        plan = decision.trajectory
+        # From the plan's own arrays: its last speed and where it ends across the ego's route.
+        assert end_speed[c] == pytest.approx(plan.v[-1], abs=1e-6)
+        _, d_end = path.to_frenet(plan.x[-1], plan.y[-1])
+        assert end_offset[c] == pytest.approx(d_end, abs=0.02)
+        assert 0.0 < horizon[c] <= plan.t[-1] + 1e-9
+        assert family[c] == int(decision.candidate.kind)
+
+
+def test_plan_switch_flags_a_plan_that_does_not_continue_the_previous_one(hidden_pedestrian_run):
+    _, probe, chunks = hidden_pedestrian_run
+    switch = per_cycle(chunks, "/series/plan_switch")
+    assert switch[0] == 0.0  # nothing to switch from
+    assert 0 < switch.sum() < len(switch)
+    for c in range(1, len(switch)):
+        before, now = probe.decisions[c - 1].candidate, probe.decisions[c].candidate
+        if switch[c] == 0.0:  # kept: the same end state, continued
+            assert now.kind == CandidateKind.CONTINUATION
+            assert (now.end_speed, now.end_offset) == pytest.approx((before.end_speed, before.end_offset))
+        else:
+            assert now.kind != CandidateKind.CONTINUATION
+
+
+def test_ego_speed_equals_the_speed_of_the_stored_path(hidden_pedestrian_run):
+    _, probe, chunks = hidden_pedestrian_run
+    times, speed = column(chunks["/series/motion/speed"], "Scalars:scalars")
+    speed = np.array([v[0] for v in speed])
+    t = np.array([f[0] for f in probe.frames])
+    xy = np.array([f[1] for f in probe.frames])
+    assert times == pytest.approx(t, abs=1e-6)
+    # Central differences of the true positions, projected on the heading.
+    velocity = (xy[2:] - xy[:-2]) / (t[2:] - t[:-2])[:, None]
+    yaw = np.array([f[2] for f in probe.frames])[1:-1]
+    along = velocity[:, 0] * np.cos(yaw) + velocity[:, 1] * np.sin(yaw)
+    assert speed[1:-1] == pytest.approx(along, abs=0.05)
+
+
+def test_ego_acceleration_follows_a_scripted_brake(tmp_path):
+    from mujoco_world.agents import ScriptedPlanner, brake
+    from mujoco_world.agents.ego_planner import EGO_PLANNERS
+
+    EGO_PLANNERS.register("test_brake_4", lambda setup: ScriptedPlanner(brake(4.0, start=0.5), setup))
+    scenario = dataclasses.replace(get_scenario("overtake_cyclist"), duration=2.0)
+    recorder = RerunRecorder(tmp_path / "brake", RecorderConfig(candidates=0))
+    run_scenario(scenario, "test_brake_4", 0, observer=recorder)
+    times, accel = column(read_chunks(recorder.path)["/series/motion/acceleration"], "Scalars:scalars")
+    accel = np.array([v[0] for v in accel])
+    assert accel[times < 0.4] == pytest.approx(0.0, abs=0.3)  # cruising
+    assert np.median(accel[times > 1.0]) == pytest.approx(-4.0, abs=0.3)  # braking at 4 m/s^2
+
+
+def test_ttc_and_distance_per_road_user_equal_a_hand_computed_case(tmp_path):
+    """Ego at 10 m/s on y = 0; a car stopped 30 m ahead; a car coming the other way 3.5 m to the left."""
+    import mujoco
+
+    scenario = get_scenario("tailgater_sudden_stop")
+    world = World(scenario)
+    assert world.n >= 3 and not any(b.is_round for b in world.scene.bodies[:3])
+    qpos, qvel = world.scene.qpos, world.scene.qvel
+    qvel[:] = 0.0
+    qpos[:, 0] = 2000.0 + 30.0 * np.arange(world.n)  # everyone else far away
+    qpos[:, 1] = 500.0
+    qpos[:, 2] = 0.0
+    qpos[0] = (0.0, 0.0, 0.0)
+    qvel[0, 0] = 10.0
+    qpos[1] = (30.0, 0.0, 0.0)
+    qpos[2] = (40.0, 3.5, np.pi)
+    qvel[2, 0] = -5.0
+    mujoco.mj_forward(world.scene.model, world.scene.data)
+    length, width = world.lengths, world.widths
+    recorder = RerunRecorder(tmp_path / "ttc", RecorderConfig(candidates=0))
+    recorder.on_start(world, scenario, "test", 0)
+    recorder.close()
+    chunks = read_chunks(recorder.path)
+
+    def first(path):
+        """The value at t = 0; nan if none was logged (a road user without a value is left out)."""
+        values = [v[0] for v in column(chunks.get(path, []), "Scalars:scalars")[1] if v]
+        return values[0] if values else np.nan
+
+    gap_ahead = 30.0 - 0.5 * (length[0] + length[1])
+    assert first("/series/ttc/user_1") == pytest.approx(gap_ahead / 10.0, rel=1e-9)
+    assert first("/series/distance/user_1") == pytest.approx(gap_ahead, abs=1e-3)
+    # The oncoming car passes beside the ego: no collision, so no time to collision.
+    assert np.isnan(first("/series/ttc/user_2"))
+    dx = 40.0 - 0.5 * (length[0] + length[2])
+    dy = 3.5 - 0.5 * (width[0] + width[2])
+    assert first("/series/distance/user_2") == pytest.approx(np.hypot(dx, dy), abs=1e-3)
+    # Far away (beyond the 50 m the distance resolves, no approach): not logged at all.
+    assert np.isnan(first("/series/distance/user_3")) and np.isnan(first("/series/ttc/user_3"))
+
+
+def test_visibility_per_road_user_matches_what_the_planner_saw(hidden_pedestrian_run):
+    _, probe, chunks = hidden_pedestrian_run
+    names = probe.world.scene.names
+    pedestrian = names.index("pedestrian")
+    times, visible = column(chunks[f"/series/visible/user_{pedestrian}"], "Scalars:scalars")
+    visible = np.array([v[0] if v else np.nan for v in visible])
+    assert visible[times < 3.0].max() == 0.0 and visible[times > 4.5].min() == 1.0
+    # At every planning cycle, a road user is logged visible iff the planner was given it.
+    logged = {}
+    for i in range(1, probe.world.n):
+        t, v = column(chunks[f"/series/visible/user_{i}"], "Scalars:scalars")
+        logged[i] = {round(float(a), 6): b[0] for a, b in zip(t, v, strict=True) if b}
+    for time, decision in zip(probe.cycle_times, probe.decisions, strict=True):
+        seen = {u.id for u in decision.road_users}
+        for i in range(1, probe.world.n):
+            value = logged[i].get(round(time, 6))
+            if value is not None:
+                assert (value == 1.0) == (i in seen), (time, i)
+
+
+def test_recording_shows_when_r_max_decides(tmp_path):
+    """With a tight R_max, cheaper candidates above it are refused: the count is recorded per cycle."""
+    config = preset("ethical").with_overrides({"risk": {"max_acceptable_risk": 1e-5}})
+    scenario = dataclasses.replace(get_scenario("overtake_cyclist"), duration=1.0)
+    recorder = RerunRecorder(tmp_path / "r-max", RecorderConfig(candidates=0))
+    probe = Probe()
+    run_scenario(scenario, config, 0, observer=ObserverGroup([recorder, probe]))
+    chunks = read_chunks(recorder.path)
+    refused = per_cycle(chunks, "/series/rejected/max_risk_refused")
+    above = per_cycle(chunks, "/series/rejected/above_max_risk")
+    assert np.array_equal(refused, [d.max_risk_refused for d in probe.decisions])
+    assert refused.max() > 0 and np.all(refused <= above)
+
+
+def test_ttc_is_a_time_within_the_horizon_or_nan(hidden_pedestrian_run):
+    _, probe, chunks = hidden_pedestrian_run
+    values = []
+    for i in range(1, probe.world.n):
+        path = f"/series/ttc/user_{i}"
+        values += [v[0] for v in column(chunks.get(path, []), "Scalars:scalars")[1] if v]
+    values = np.array(values)
+    finite = np.isfinite(values)
+    assert finite.any() and (~finite).any()  # approaching and not, in this run
+    assert np.all(np.isnan(values[~finite]))  # "none within the horizon" is nan, never inf
+    assert np.all((values[finite] >= 0.0) & (values[finite] <= RecorderConfig().ttc_horizon))
