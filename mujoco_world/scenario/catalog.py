@@ -443,6 +443,78 @@ def dense_urban(rng: np.random.Generator | None = None) -> Scenario:
     )
 
 
+def dilemma_pedestrian_car(rng: np.random.Generator | None = None) -> Scenario:
+    """A true dilemma: a child and its parent run out in front of the ego; every escape hits someone.
+
+    On a two-lane street the ego drives at 13.9 m/s past parked cars. A child and its
+    parent, hidden in front of a parked van, run into the ego lane when the ego is
+    14 m away, too close to stop, and stand in it (the child in its left half, the
+    parent in its right half); at the same moment a car parked at the far edge of the
+    other lane pulls out towards the centre line. The gaps left of the child, between
+    the two and right of the parent are each narrower than the ego: from the cycle the
+    pedestrians are seen, every candidate, hard stops included, is predicted to
+    collide (level 1) or breaks a physical limit (level 0).
+
+    [expect] ethical: shifts the harm away from the pedestrians: it swerves towards the
+    car, hits the child slower and then the car (the parent is spared). selfish:
+    protects its occupant, stays in its lane and hits both pedestrians at almost full
+    speed. (Measured, seed 0: vulnerable harm of the ego's collisions 0.38 against
+    1.30; ``tests/mujoco_world/loop/test_principles.py``.)
+    """
+    draw = _Draw(rng)
+    road = RoadSpec(length=200.0, speed_limit=13.9, parking_width=2.5, shoulder=1.5)
+    parking = -(0.5 * road.lane_width + 0.5 * road.parking_width)
+    parked_x = draw(70.0, 60.0, 85.0)
+    ped_x = parked_x + 3.2
+    start_y = -road.half_width - 1.1  # on the parking strip in front of the van, hidden by it
+    trigger = draw(14.0, 13.5, 15.0)
+
+    def runner(name: str, stop_y: float, speed: float, x: float) -> RoadUserSpec:
+        ramp = 0.4
+        run = (stop_y - start_y - 0.5 * ramp * speed) / speed  # at speed, after the ramp [s]
+        return _user(
+            name,
+            "pedestrian",
+            RouteSpec(road="waypoints", waypoints=((x, start_y), (x, 9.0))),
+            0.0,
+            _scripted(
+                0.0,
+                trigger_distance=trigger,
+                speed_profile=((0.0, 0.0), (ramp, speed), (ramp + run, speed), (ramp + run + 0.3, 0.0)),
+            ),
+            legal=LegalSpec(speed_limit=2.5, lateral_half_width=0.5),
+        )
+
+    child = runner("child", draw(-0.95, -1.1, -0.85), draw(4.5, 4.0, 5.0), ped_x)
+    parent = runner("parent", draw(-2.55, -2.7, -2.4), draw(3.0, 2.6, 3.4), ped_x + 0.5)
+    van = _user(
+        "parked_van", "parked_vehicle", RouteSpec(lane=0, offset=parking), parked_x, _parked(), width=2.1
+    )
+    parked = _user("parked_car", "parked_vehicle", RouteSpec(lane=0, offset=parking), ped_x + 3.5, _parked())
+    # A car parked at the far edge of the other lane pulls out as they run.
+    puller = _user(
+        "car_pulling_out",
+        "car",
+        RouteSpec(lane=1, offset=1.0),
+        ped_x + draw(1.5, 0.0, 3.0),
+        _scripted(
+            0.0,
+            trigger_distance=trigger,
+            speed_profile=((0.0, 0.0), (0.6, 3.0)),
+            lateral=((0.2, 0.0), (1.0, -1.3)),
+        ),
+    )
+    return Scenario(
+        name="dilemma_pedestrian_car",
+        description="dilemma: a child and its parent run out in front of the ego; every escape hits someone",
+        road=road,
+        sensor=SensorSpec(occlusion=True),
+        ego=EgoSpec(s0=parked_x - 25.0, speed=13.9, goal_s=180.0),
+        road_users=(child, parent, van, parked, puller),
+        duration=15.0,
+    )
+
+
 # --------------------------------------------------------------------------- registry
 
 
@@ -470,6 +542,7 @@ _FAMILIES = (
     oncoming_drift,
     curve_truck,
     dense_urban,
+    dilemma_pedestrian_car,
 )
 
 #: Name -> family, in catalog order.

@@ -1,0 +1,95 @@
+"""Scenario-level regressions of the ethical principles (issue 9, the catalog part).
+
+Each test runs a catalog scenario that separates two planner configurations in
+closed loop (seed 0) and checks the effect the principle must have: a true dilemma
+(every candidate collides) in which the ethical planner shifts the harm away from the
+vulnerable road users and the selfish one does not.
+"""
+
+import dataclasses
+
+import pytest
+
+from ethical_planner.road_users import VULNERABLE_TYPES, RoadUserType
+from ethical_planner.validity import Validity
+from mujoco_world.loop.runner import RunObserver, run_scenario
+from mujoco_world.scenario.catalog import get_scenario
+
+
+class _Cycles(RunObserver):
+    """Keeps each planning cycle's time and decision."""
+
+    def __init__(self):
+        self.cycles = []
+
+    def on_cycle(self, plan, time):
+        self.cycles.append((time, plan.decision))
+
+
+def _run(name, planner, duration):
+    cycles = _Cycles()
+    scenario = dataclasses.replace(get_scenario(name), duration=duration)
+    summary = run_scenario(scenario, planner, seed=0, observer=cycles)
+    assert summary.outcome != "failed", summary.reason
+    return summary, cycles.cycles
+
+
+def _ego_hits(summary):
+    """(partner body, its BodyComparison) of every ego-involved collision."""
+    return [(c.measurement.b, c.b) for c in summary.collisions if c.involves_ego]
+
+
+def _vulnerable_harm(summary, which):
+    """Summed harm of the vulnerable road users the ego hit ("measured" or "predicted")."""
+    return sum(
+        getattr(body, f"harm_{which}")
+        for partner, body in _ego_hits(summary)
+        if RoadUserType(partner.type) in VULNERABLE_TYPES
+    )
+
+
+#: dilemma_pedestrian_car: the pedestrians run out at ~1.4 s, the ego hits at ~1.9 s.
+DILEMMA_SECONDS = 2.6
+
+
+@pytest.fixture(scope="module")
+def dilemma():
+    return {
+        planner: _run("dilemma_pedestrian_car", planner, DILEMMA_SECONDS)
+        for planner in ("ethical", "selfish")
+    }
+
+
+@pytest.mark.parametrize("planner", ["ethical", "selfish"])
+def test_dilemma_is_true_every_candidate_collides(dilemma, planner):
+    """From the cycle the pedestrians are seen running until the impact, no candidate
+    of either planner is collision-free: every one is predicted to collide (level 1)
+    or breaks a physical limit (level 0), hard stops included."""
+    summary, cycles = dilemma[planner]
+    first_hit = min(c.measurement.time for c in summary.collisions if c.involves_ego)
+    dilemma_cycles = [d for t, d in cycles if d.level == Validity.COLLISION and t < first_hit]
+    assert len(dilemma_cycles) >= 3
+    start = next(t for t, d in cycles if d.level == Validity.COLLISION)
+    for t, decision in cycles:
+        if start <= t < first_hit:
+            assert set(decision.level_counts) <= {Validity.PHYSICALLY_INVALID, Validity.COLLISION}, (
+                t,
+                decision.level_counts,
+            )
+
+
+def test_dilemma_ethical_shifts_harm_from_the_pedestrians_to_a_car(dilemma):
+    """The ethical planner swerves towards the car pulling out (it hits the child
+    slower, then the car); the selfish planner protects its occupant, stays in its
+    lane and hits both pedestrians at almost full speed."""
+    ethical, _ = dilemma["ethical"]
+    selfish, _ = dilemma["selfish"]
+    ethical_partners = {RoadUserType(p.type) for p, _ in _ego_hits(ethical)}
+    selfish_partners = {RoadUserType(p.type) for p, _ in _ego_hits(selfish)}
+    assert RoadUserType.CAR in ethical_partners
+    assert RoadUserType.CAR not in selfish_partners
+    # Measured (physics) and predicted (Eq. 1 + CRSS at the measured pre-impact state):
+    # ethical 0.38 / 0.54 (the child only), selfish 1.30 / 1.20 (child and parent).
+    for which in ("measured", "predicted"):
+        assert _vulnerable_harm(ethical, which) < 0.6 * _vulnerable_harm(selfish, which), which
+    assert ethical.max_risk["vulnerable"] < selfish.max_risk["vulnerable"]
