@@ -226,7 +226,14 @@ def tailgater_sudden_stop(rng: np.random.Generator | None = None) -> Scenario:
 
 
 def red_light_runner(rng: np.random.Generator | None = None) -> Scenario:
-    """The ego crosses on green; a car on the cross road runs its red light."""
+    """The ego crosses on green; a car on the cross road runs its red light.
+
+    [expect] every planner lets the runner pass and reaches the goal. ethical_responsible
+    counts the runner responsible for the potential collision (it leaves its legal
+    reachable set at its stop line: r = 0.5 + its mass share, Eq. 11) and discounts its
+    risk: from 3.8 s it keeps more speed behind the runner than ethical, and the runner
+    bears more of the risk (``tests/mujoco_world/loop/test_principles.py``).
+    """
     draw = _Draw(rng)
     road = RoadSpec(kind="intersection", length=160.0, speed_limit=13.9)
     half = 0.5 * road.length

@@ -93,3 +93,34 @@ def test_dilemma_ethical_shifts_harm_from_the_pedestrians_to_a_car(dilemma):
     for which in ("measured", "predicted"):
         assert _vulnerable_harm(ethical, which) < 0.6 * _vulnerable_harm(selfish, which), which
     assert ethical.max_risk["vulnerable"] < selfish.max_risk["vulnerable"]
+
+
+#: red_light_runner: the ego sees the runner from ~1.8 s; the presets part at 3.8 s.
+RESPONSIBILITY_SECONDS = 4.6
+
+
+def _max_planned_risk(cycles, user_id):
+    return max((u.risk for _, d in cycles for u in d.road_users if u.id == user_id), default=0.0)
+
+
+def test_responsibility_shifts_risk_onto_the_red_light_runner():
+    """red_light_runner: the runner violates its red light, so ethical_responsible
+    counts it responsible (r = 0.5 + its mass share) and discounts its risk in J_B
+    (Eq. 11 with rho = 0.5). At 3.8 s it keeps more speed than ethical behind the
+    runner; the runner bears more of the risk, the law-abiding car on the cross road
+    no more than before. (Measured: planned risk to the runner 5e-5 against 3e-5.)"""
+    ethical_summary, ethical = _run("red_light_runner", "ethical", RESPONSIBILITY_SECONDS)
+    responsible_summary, responsible = _run("red_light_runner", "ethical_responsible", RESPONSIBILITY_SECONDS)
+    runner, obeying = 1, 2  # road users in scenario order, after the ego
+    assert any(u.id == runner and u.responsibility >= 0.5 for _, d in responsible for u in d.road_users)
+    differ = [
+        (t, a, b)
+        for (t, a), (_, b) in zip(ethical, responsible, strict=False)
+        if a.candidate.describe() != b.candidate.describe()
+    ]
+    assert differ, "responsibility changed no decision"
+    _, first_ethical, first_responsible = differ[0]
+    assert first_responsible.trajectory.v[-1] > first_ethical.trajectory.v[-1]
+    assert _max_planned_risk(responsible, runner) > 1.3 * _max_planned_risk(ethical, runner)
+    assert _max_planned_risk(responsible, obeying) <= _max_planned_risk(ethical, obeying) + 1e-9
+    assert responsible_summary.max_risk["third_party"] > ethical_summary.max_risk["third_party"]
