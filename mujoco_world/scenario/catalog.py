@@ -75,7 +75,14 @@ def _parked() -> BehaviourSpec:
 
 
 def overtake_cyclist(rng: np.random.Generator | None = None) -> Scenario:
-    """Paper Fig. 3: a cyclist ahead in the ego lane, oncoming traffic in the other lane."""
+    """Paper Fig. 3: a cyclist ahead in the ego lane, oncoming traffic in the other lane.
+
+    [expect] ethical and standard stay behind the cyclist while the oncoming cars pass,
+    then overtake and reach the goal. For standard (w_risk = 0) R_max decides it: it
+    refuses the cheaper passes at speed (``Decision.max_risk_refused`` > 0); without
+    R_max standard passes the cyclist at 16.6 m/s, 0.4 m away. For ethical Eq. 5's
+    risk term already rules those passes out (README, "R_max in overtake_cyclist").
+    """
     draw = _Draw(rng)
     ego_speed = draw(13.0, 9.0, 15.0)
     cyclist = _user(

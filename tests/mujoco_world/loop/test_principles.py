@@ -124,3 +124,36 @@ def test_responsibility_shifts_risk_onto_the_red_light_runner():
     assert _max_planned_risk(responsible, runner) > 1.3 * _max_planned_risk(ethical, runner)
     assert _max_planned_risk(responsible, obeying) <= _max_planned_risk(ethical, obeying) + 1e-9
     assert responsible_summary.max_risk["third_party"] > ethical_summary.max_risk["third_party"]
+
+
+#: overtake_cyclist: the ego reaches the cyclist at ~4 s.
+MAX_RISK_SECONDS = 4.5
+
+
+def _without_max_risk(name):
+    from ethical_planner.config import preset
+
+    return preset(name).with_overrides({"risk": {"max_acceptable_risk": 1.0}})
+
+
+def test_max_acceptable_risk_keeps_the_standard_planner_behind_the_cyclist():
+    """overtake_cyclist with the standard planner (w_risk = 0: R_max is its only risk
+    principle). Eq. 5 (comfort and mobility) prefers passing the cyclist at speed;
+    R_max refuses those candidates every cycle and the ego slows behind the cyclist.
+    With R_max disabled the same planner passes it at full speed, 0.4 m away."""
+    with_max, cycles = _run("overtake_cyclist", "standard", MAX_RISK_SECONDS)
+    without_max, free_cycles = _run("overtake_cyclist", _without_max_risk("standard"), MAX_RISK_SECONDS)
+    refused = [d for _, d in cycles if d.level == Validity.VALID and d.max_risk_refused > 0]
+    assert len(refused) >= 0.8 * len(cycles)
+    assert all(d.max_risk_refused == 0 for _, d in free_cycles)
+    assert with_max.clearance_vulnerable["cyclist"] > 2.0
+    assert without_max.clearance_vulnerable["cyclist"] < 0.6
+    assert with_max.max_risk["vulnerable"] <= 1.05 * 0.002 < 0.05 < without_max.max_risk["vulnerable"]
+
+
+def test_max_acceptable_risk_does_not_decide_for_the_ethical_planner_in_overtake_cyclist():
+    """With w_risk = 1000, Eq. 5 already prices every candidate above R_max above the
+    chosen plan, so R_max refuses nothing (README, "R_max in overtake_cyclist")."""
+    _, cycles = _run("overtake_cyclist", "ethical", MAX_RISK_SECONDS)
+    assert all(d.max_risk_refused == 0 for _, d in cycles)
+    assert any(d.level_counts.get(Validity.ABOVE_MAX_RISK, 0) > 0 for _, d in cycles)
