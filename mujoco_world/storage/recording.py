@@ -33,7 +33,8 @@ Entities (all in the world frame, z up, road plane z = 0):
     to the chosen one (R_max decided the cycle if > 0).
   - ``series/best_cost/<level>`` (``valid`` and the four above): the cost of the
     cheapest candidate of each level (Eq. 5 on ``valid``, Eq. 6 below; nan if the
-    level is empty) and ``world/plan/best/<level>``: its path, labelled with its
+    level is empty) and ``world/plan/best``: their paths, one strip per level
+    present (highest level first), coloured by level and labelled with the level,
     family, parameters and cost.
   - ``series/chosen/{horizon,end_speed,end_offset,deceleration,family}``: the
     chosen candidate's parameters [s, m/s, m, m/s^2; family: ``CandidateKind``
@@ -418,27 +419,23 @@ class RerunRecorder(RunObserver):
 
     def _log_best(self, decision: Decision, time: float) -> None:
         """The cheapest candidate of every level: its cost as a series, its path in the scene."""
-        rec, s, c = self._stream(), self._series, self.cycle
-        cx, cy = decision.candidate_x, decision.candidate_y
-        for level in Validity:
+        s, c = self._series, self.cycle
+        strips, colors, labels = [], [], []
+        for level in sorted(Validity, reverse=True):
             name = _level_name(level)
             best = decision.best_by_level.get(int(level))
             s.add(f"series/best_cost/{name}", time, c, math.nan if best is None else best.cost)
-            path = f"world/plan/best/{name}"
             if best is None:
-                rec.log(path, rr.Clear(recursive=False))
                 continue
-            color = LEVEL_COLORS[int(level)][:3]
-            rec.log(
-                path,
-                rr.LineStrips3D(
-                    [_to3(np.column_stack([cx[best.index], cy[best.index]]), 1.5 * _Z_LINE)],
-                    colors=[color],
-                    radii=0.06,
-                    labels=[f"best {name}: {best.candidate.describe()}, cost {best.cost:.4g}"],
-                    show_labels=False,
-                ),
-            )
+            xy = np.column_stack([decision.candidate_x[best.index], decision.candidate_y[best.index]])
+            strips.append(_to3(xy, 1.5 * _Z_LINE))
+            colors.append(LEVEL_COLORS[int(level)][:3])
+            labels.append(f"{name}: {best.candidate.describe()}, cost {best.cost:.4g}")
+        # One entity, one strip per level present (the levels absent this cycle vanish).
+        self._stream().log(
+            "world/plan/best",
+            rr.LineStrips3D(strips, colors=colors, radii=0.06, labels=labels, show_labels=False),
+        )
 
     def on_impact(self, record: ImpactRecord) -> None:
         """Log the contact point, the force arrow, delta-v and harm (measured and predicted)."""

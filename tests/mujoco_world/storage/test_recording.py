@@ -11,7 +11,7 @@ from rerun.chunk import RrdReader
 
 from ethical_planner.config import preset
 from ethical_planner.sampling import CandidateKind
-from ethical_planner.validity import LIMITS, Validity
+from ethical_planner.validity import LIMITS
 from mujoco_world.loop.runner import ObserverGroup, RunObserver, run_scenario
 from mujoco_world.loop.world import World
 from mujoco_world.scenario.catalog import get_scenario
@@ -298,13 +298,17 @@ def test_best_cost_of_each_level_is_logged_and_bounds_the_chosen_plan(hidden_ped
                 assert best[c] <= decision.costs["total"] + 1e-9
                 if not decision.continued:
                     assert best[c] == pytest.approx(decision.costs["total"])
-    _, strips = column(chunks["/world/plan/best/valid"], "LineStrips3D:strips")
-    decision = probe.decisions[-1]
-    if int(Validity.VALID) in decision.best_by_level:
-        index = decision.best_by_level[int(Validity.VALID)].index
-        last = np.asarray(strips[-1][0])
-        assert last[:, 0] == pytest.approx(decision.candidate_x[index])
-        assert last[:, 1] == pytest.approx(decision.candidate_y[index])
+    # The paths: one strip per level present, labelled with the level.
+    _, strips = column(chunks["/world/plan/best"], "LineStrips3D:strips")
+    _, labels = column(chunks["/world/plan/best"], "LineStrips3D:labels")
+    assert len(strips) == len(probe.decisions)
+    for decision, cycle_strips, cycle_labels in zip(probe.decisions, strips, labels, strict=True):
+        assert len(cycle_strips) == len(decision.best_by_level)
+        for strip, label in zip(cycle_strips, cycle_labels, strict=True):
+            level = {**REJECTED, "valid": 10}[label.split(":")[0]]
+            index = decision.best_by_level[level].index
+            assert np.asarray(strip)[:, 0] == pytest.approx(decision.candidate_x[index])
+            assert np.asarray(strip)[:, 1] == pytest.approx(decision.candidate_y[index])
 
 
 def test_chosen_candidate_parameters_match_the_executed_plan(hidden_pedestrian_run):
