@@ -602,6 +602,16 @@ class RerunRecorder(RunObserver):
             rec.log(f"series/best_cost/{name}", rr.SeriesLines(colors=[color], names=[name]), static=True)
             if level in REJECTED_LEVELS:
                 rec.log(f"series/rejected/{name}", rr.SeriesLines(colors=[color], names=[name]), static=True)
+        rec.log(
+            "series/candidates/valid",
+            rr.SeriesLines(colors=[LEVEL_COLORS[10][:3]], names=["valid"]),
+            static=True,
+        )
+        rec.log(
+            "series/candidates/total", rr.SeriesLines(colors=[(230, 230, 230)], names=["total"]), static=True
+        )
+        for limit in LIMITS:
+            rec.log(f"series/rejected/limit/{limit}", rr.SeriesLines(names=[f"limit: {limit}"]), static=True)
         families = ", ".join(f"{k.value} {k.name.lower()}" for k in CandidateKind)
         rec.log(
             "series/chosen/family",
@@ -774,7 +784,11 @@ class RerunRecorder(RunObserver):
                         rrb.TimeSeriesView(origin="series/planning_ms", name="planning time [ms]"),
                     ),
                     rrb.Tabs(
-                        rrb.TimeSeriesView(origin="series/rejected", name="rejected candidates"),
+                        rrb.TimeSeriesView(
+                            origin="series",
+                            contents=["$origin/rejected/**", "$origin/candidates/**"],
+                            name="rejected candidates",
+                        ),
                         rrb.TimeSeriesView(origin="series/best_cost", name="best cost per level"),
                         rrb.TimeSeriesView(origin="series/chosen", name="chosen candidate"),
                         rrb.TimeSeriesView(origin="series/plan_switch", name="plan switch"),
