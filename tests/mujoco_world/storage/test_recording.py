@@ -171,6 +171,9 @@ def test_ellipse_strips_axes():
         ("candidates", {"candidates": -1}),
         ("prediction_stride", {"prediction_stride": 0}),
         ("flush_interval", {"flush_interval": 0}),
+        ("ttc_horizon", {"ttc_horizon": 0.0}),
+        ("ttc_horizon", {"ttc_horizon": float("inf")}),
+        ("follow_height", {"follow_height": -5.0}),
     ],
 )
 def test_config_rejects_bad_values(field, kwargs):
