@@ -85,7 +85,8 @@ def outside_drivable_area(
     a plan that skims the kerb is not executable by a controller with a tracking error
     and a body that yaws. A centre inside the area shrunk by the grown footprint's
     half-diagonal has all corners inside, so only the other centres (near the road
-    edge) get the corner test.
+    edge) get the corner test; if the area has holes (debris on the road), footprints
+    with all corners inside then get the exact polygon containment test.
     """
     area = environment.drivable_area
     shape = Shape(shape.length + 2.0 * margin, shape.width + 2.0 * margin)
@@ -101,7 +102,19 @@ def outside_drivable_area(
             shape.length,
             shape.width,
         )
-        outside.ravel()[edge] = ~np.all(shapely.contains_xy(area, cx, cy), axis=-1)
+        corners_in = np.all(shapely.contains_xy(area, cx, cy), axis=-1)
+        holes = _holes(area)
+        if holes is not None and corners_in.any():
+            # A hole (debris) smaller than the footprint can lie between its corners:
+            # footprints with all corners inside and near a hole get the exact test.
+            near = np.flatnonzero(corners_in)
+            px, py = candidates.x.ravel()[edge[near]], candidates.y.ravel()[edge[near]]
+            near = near[shapely.dwithin(holes, shapely.points(px, py), half_diagonal)]
+            if near.size:
+                ring = np.stack([cx[near], cy[near]], axis=-1)
+                footprints = shapely.polygons(np.concatenate([ring, ring[:, :1]], axis=1))
+                corners_in[near] = ~shapely.intersects(holes, footprints)
+        outside.ravel()[edge] = ~corners_in
     return outside
 
 
@@ -152,6 +165,17 @@ def prediction_collision_probability(
     per_component = cp.probability.reshape(n, n_obs, k, n_t)
     probability = np.einsum("nokt,otk->not", per_component, prediction.component_weight)
     return CollisionProbability(np.clip(probability, 0.0, 1.0), cp.mean_overlap[:, ::k])
+
+
+def _holes(area: shapely.Geometry) -> shapely.Geometry | None:
+    """The interior rings of the drivable area (obstacles inside the road) as polygons, or None."""
+    parts = getattr(area, "geoms", (area,))
+    rings = [shapely.Polygon(r) for p in parts for r in p.interiors]
+    if not rings:
+        return None
+    holes = shapely.union_all(rings)
+    shapely.prepare(holes)
+    return holes
 
 
 def assess_risk(
