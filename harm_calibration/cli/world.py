@@ -197,6 +197,7 @@ def _scenarios(args: argparse.Namespace) -> int:
                     "road_users": len(scenario.road_users),
                     "duration": scenario.duration,
                     "description": CATALOG[name].description,
+                    "expect": _expectations(scenario.expect),
                 }
             )
         print_json(entries)
@@ -204,6 +205,15 @@ def _scenarios(args: argparse.Namespace) -> int:
     for name in catalog_names():
         print(describe(name))
     return 0
+
+
+def _expectations(expect) -> dict:  # noqa: ANN001 - an ExpectSpec or None, imported lazily
+    """The items a scenario expects, by name (empty if none)."""
+    if expect is None:
+        return {}
+    from ethical_planner.records import to_plain
+
+    return {k: v for k, v in to_plain(expect).items() if v is not None and v != []}
 
 
 def _progress_observer(label: str, enabled: bool):
@@ -256,14 +266,15 @@ def _run(args: argparse.Namespace) -> int:
     progress = _progress_observer(f"{scenario.name} [{name}]", show_progress(args))
     record = run_task(task, config, resume=False, observers=[progress]).record
     summary = record.summary
+    code = 1 if summary.outcome == "failed" or summary.verdict == "fail" else 0
     if args.json:
         print_json(record.to_dict())
-        return 1 if summary.outcome == "failed" else 0
+        return code
     _print_run(record)
     print(f"wrote {task.record_path}  (run id {record.run_id}, index {root / 'index.jsonl'})")
     if record.recording:
         print(f"recording: {record.recording}  (open with: etp replay {record.run_id} --root {root})")
-    return 1 if summary.outcome == "failed" else 0
+    return code
 
 
 def _print_run(record) -> None:  # noqa: ANN001 - a RunRecord, imported lazily
@@ -276,6 +287,10 @@ def _print_run(record) -> None:  # noqa: ANN001 - a RunRecord, imported lazily
         f"VRU {risk.get('vulnerable', math.nan):.4f}; "
         f"{summary.timings.get('real_time_factor', math.nan):.1f}x real time"
     )
+    if summary.expectations:
+        print(f"  expectations: {summary.verdict.upper()}")
+        for e in summary.expectations:
+            print(f"    {'pass' if e.passed else 'FAIL'}  {e.name}: expected {e.expected}, got {e.measured}")
     for impact in summary.collisions:
         m = impact.measurement
         print(
@@ -331,6 +346,7 @@ def _demo(args: argparse.Namespace) -> int:
         aggregate_rows,
         comparison_table,
         run_batch,
+        suite_result,
         write_aggregate,
     )
 
@@ -357,7 +373,12 @@ def _demo(args: argparse.Namespace) -> int:
     resumed = sum(1 for r in results if r.resumed)
     failed = sum(1 for r in results if r.record.summary.outcome == "failed")
     if args.json:
-        data = {"runs": aggregate_rows(results), "wall_time": wall, "aggregate": str(path)}
+        data = {
+            "runs": aggregate_rows(results),
+            "suite": suite_result(r.record for r in results),
+            "wall_time": wall,
+            "aggregate": str(path),
+        }
         print_json({**data, "interrupted": interrupted is not None, "total": len(tasks)})
     else:
         print(comparison_table(r.record for r in results))

@@ -179,7 +179,14 @@ class Fleet:
         self.d_rate = np.zeros(self.k)
         self.d_accel = np.zeros(self.k)
         self.activated_at = np.full(self.k, math.inf)
-        self.active = np.ones(self.k, dtype=bool)  # False once crashed
+        self.active = np.ones(self.k, dtype=bool)  # False once crashed or gone
+        #: Road users that have left the world past their route's end, (k,) bool.
+        self.left = np.zeros(self.k, dtype=bool)
+        #: Arc length past which a road user leaves: route end + half its length [m], (k,)
+        #: (its rear has crossed the road's end; inf for bodies whose motion a model gives).
+        self.exit_s = (
+            self.routes.length + 0.5 * np.array([u.shape[0] for u in self.specs]) if self.k else np.zeros(0)
+        )
         self._next_tick = 0.0
         self._time = 0.0
         #: Pedestrians that have started to cross, (k,) bool.
@@ -200,6 +207,7 @@ class Fleet:
             if isinstance(model, GivenMotion):
                 rows = np.flatnonzero(self._kind_mask[kind])
                 self._given.append((model, rows, model.setup(self, rows)))
+                self.exit_s[rows] = math.inf
 
     # ------------------------------------------------------------------ states
 
@@ -227,10 +235,11 @@ class Fleet:
     def presence(self, time: float) -> np.ndarray:
         """(k,) bool: which road users exist in the world at ``time`` [s].
 
-        Route-following road users always do; a model giving its bodies' motion
-        decides for its rows (a recording exists while it lasts).
+        Route-following road users do until their body has passed their route's end
+        (``left``, set by ``references``); a model giving its bodies' motion decides
+        for its rows (a recording exists while it lasts).
         """
-        present = np.ones(self.k, dtype=bool)
+        present = ~self.left
         for model, rows, state in self._given:
             present[rows] = model.presence(state, time)
         return present
@@ -255,6 +264,12 @@ class Fleet:
         self.s = self.s + 0.5 * (self.v + v_new) * dt
         self.v = v_new
         self.d = self.d + self.d_rate * dt
+        gone = self.active & ~self.left & (self.s > self.exit_s)
+        if gone.any():
+            # Past the route's end: the road user leaves the world (crashed ones, not
+            # active, stay), and its behaviour stops.
+            self.left |= gone
+            self.deactivate(gone)
         x, y, theta, kappa = self.routes.lookup(self.rows, self.s)
         c, s = np.cos(theta), np.sin(theta)
         p = np.column_stack([x - self.d * s, y + self.d * c])
@@ -269,7 +284,7 @@ class Fleet:
         return p, vel, acc, yaw, rate
 
     def deactivate(self, mask: np.ndarray) -> None:
-        """Stop the behaviours of crashed road users (``mask`` (k,) bool)."""
+        """Stop the behaviours of crashed or departed road users (``mask`` (k,) bool)."""
         self.active &= ~mask
         self.v[mask] = 0.0
         self.a[mask] = 0.0

@@ -422,6 +422,8 @@ def aggregate_row(record: RunRecord) -> dict[str, Any]:
             if record.avoidability is not None and record.avoidability.best is not None
             else None
         ),
+        "verdict": s.verdict,
+        "failed_expectations": [e.name for e in s.expectations if not e.passed],
         "wall_time": s.timings.get("total"),
     }
 
@@ -450,7 +452,8 @@ def _table_line(record: RunRecord) -> str:
         f"{_fmt(risk.get('vulnerable')):>7} "
         f"{_fmt(harm.get('ego'), 3):>7} {_fmt(harm.get('third_party'), 3):>6} "
         f"{_fmt(harm.get('vulnerable'), 3):>6} {_fmt(third_harm, 3):>7} "
-        f"{_fmt(s.min_distance, 2):>6} {_fmt(s.min_distance_vulnerable, 2):>6} {_avoidable(record):>5}"
+        f"{_fmt(s.min_distance, 2):>6} {_fmt(s.min_distance_vulnerable, 2):>6} {_avoidable(record):>5} "
+        f"{_VERDICT_CELL[s.verdict]:<6}"
     )
 
 
@@ -478,6 +481,15 @@ def _planner_totals(planner: str, records: Sequence[RunRecord]) -> str:
     )
 
 
+def suite_result(records: Iterable[RunRecord]) -> dict[str, int]:
+    """The batch as a test suite: runs whose scenario expectations pass, fail, or that expect nothing."""
+    verdicts = [r.summary.verdict for r in records]
+    return {v: verdicts.count(v) for v in ("pass", "fail", "none")}
+
+
+_VERDICT_CELL = {"pass": "pass", "fail": "FAIL", "none": "-"}
+
+
 def comparison_table(records: Iterable[RunRecord]) -> str:
     """Plain-text table: one line per run, then per-planner totals (paper Figs. 5, 6).
 
@@ -488,7 +500,7 @@ def comparison_table(records: Iterable[RunRecord]) -> str:
     head = (
         f"{'scenario':<30} {'planner':<9} {'seed':>4} {'outcome':<8} {'t [s]':>6} {'ego':>3} {'3rd':>3} "
         f"{'risk ego':>8} {'3rd':>7} {'VRU':>7} {'harm ego':>7} {'3rd':>6} {'VRU':>6} {'3rd-pty':>7} "
-        f"{'min d':>6} {'VRU d':>6} {'avoid':>5}"
+        f"{'min d':>6} {'VRU d':>6} {'avoid':>5} {'expect':<6}"
     )
     lines = [head, "-" * len(head)]
     lines += [_table_line(s) for s in runs]
@@ -501,13 +513,23 @@ def comparison_table(records: Iterable[RunRecord]) -> str:
         f"min d / VRU d: smallest ego distance to any road user / a vulnerable one [m]; goal~: a goal "
         f"passing a vulnerable road user closer than {VULNERABLE_CLEARANCE} m;",
         "avoid: the ego collision was avoidable by an open-loop manoeuvre (etp avoidability; ?: not "
-        "searched, -: no ego collision)",
+        "searched, -: no ego collision); expect: the scenario's [expect] table passed or FAILED",
         "",
         "per planner: runs, outcomes; mean of max risk per group and summed measured harm per group "
         "over the runs that did not fail",
     ]
     for planner in sorted({r.summary.planner for r in runs}):
         lines.append(_planner_totals(planner, [r for r in runs if r.summary.planner == planner]))
+    lines += ["", "test suite (scenario [expect] tables): pass / fail / no expectations"]
+    for planner in sorted({r.summary.planner for r in runs}):
+        verdicts = [r.summary.verdict for r in runs if r.summary.planner == planner]
+        failing = sorted(
+            {r.summary.scenario for r in runs if r.summary.planner == planner and r.summary.verdict == "fail"}
+        )
+        lines.append(
+            f"  {planner:<9} {verdicts.count('pass'):>3} pass {verdicts.count('fail'):>3} fail "
+            f"{verdicts.count('none'):>3} none" + (f"  | failing: {', '.join(failing)}" if failing else "")
+        )
     return "\n".join(lines)
 
 
@@ -528,7 +550,12 @@ def write_aggregate(out: str | Path, results: Sequence[TaskResult], wall_time: f
     runs = aggregate_rows(results)
     path = write_json(
         out / "aggregate.json",
-        {"runs": runs, "wall_time": wall_time, "written": time.strftime("%Y-%m-%dT%H:%M:%S")},
+        {
+            "runs": runs,
+            "suite": suite_result(r.record for r in results),
+            "wall_time": wall_time,
+            "written": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        },
     )
     write_text(out / "table.txt", comparison_table(r.record for r in results) + "\n")
     return path

@@ -12,7 +12,8 @@ collision. The loop itself is short (``ClosedLoop._step``); around it:
   simulation or a failing impact measurement ends the run as ``failed`` with the
   reason, and what was measured until then is kept; Ctrl-C closes the run as failed
   (observers see ``on_end``) and then raises ``RunInterrupted``;
-* summary building (``summary.build_summary``).
+* summary building (``summary.build_summary``), with the scenario's ``[expect]``
+  items checked (``evaluation.expectations``).
 
 Adding a stop rule or a metric is a new object passed to ``run_scenario``; the loop
 does not change.
@@ -23,6 +24,7 @@ from __future__ import annotations
 import copy
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -38,6 +40,7 @@ from mujoco_world.agents.ego_planner import (
     make_ego_planner,
 )
 from mujoco_world.evaluation.compare import compare_impact
+from mujoco_world.evaluation.expectations import check_expectations
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.metrics import Metric, default_metrics
 from mujoco_world.loop.observers import ObserverGroup, RunObserver
@@ -101,8 +104,9 @@ def _plan_reference(plan: Plan, t0: float) -> TrajectoryReference:
 
 def _bodies(world: World) -> tuple[BodyRecord, ...]:
     scene = world.scene
+    kinds = (None, *(u.kind for u in world.scenario.road_users))
     return tuple(
-        BodyRecord(i, b.name, b.type, b.length, b.width, float(scene.masses[i]))
+        BodyRecord(i, b.name, b.type, b.length, b.width, float(scene.masses[i]), kinds[i])
         for i, b in enumerate(scene.bodies)
     )
 
@@ -361,7 +365,7 @@ class ClosedLoop:
             "measurement": self.timing["measurement"] + world.timing["measurement"],
             "real_time_factor": world.time / wall if wall > 0 else float("inf"),
         }
-        return build_summary(
+        summary = build_summary(
             scenario=run.scenario.name,
             planner=run.planner,
             seed=run.seed,
@@ -376,6 +380,7 @@ class ClosedLoop:
             timings=timings,
             notes=(*run.scenario.notes, *world.notes),
         )
+        return replace(summary, expectations=check_expectations(run.scenario.expect, summary))
 
 
 def closed_loop(

@@ -36,6 +36,7 @@ class BodyRecord:
         length, width: footprint [m] (pedestrians: a round proxy of diameter
             min(length, width)).
         mass: [kg].
+        kind: the scenario's finer kind of its type (``child``), or None.
     """
 
     id: int
@@ -44,6 +45,7 @@ class BodyRecord:
     length: float
     width: float
     mass: float
+    kind: str | None = None
 
     def __post_init__(self) -> None:
         check(
@@ -57,6 +59,23 @@ class BodyRecord:
     def shape(self) -> Shape:
         """Footprint as the planner's ``Shape`` [m]."""
         return Shape(self.length, self.width)
+
+
+@dataclass(frozen=True, slots=True)
+class ExpectationResult:
+    """One item of a scenario's ``[expect]`` table, checked against a run.
+
+    Attributes:
+        name: the item (``ego_collision``, ``max_vulnerable_harm``...).
+        expected: what the scenario expects, as text (``false``, ``<= 0.1``, ``goal``).
+        measured: what the run gave, as text.
+        passed: the run meets it.
+    """
+
+    name: str
+    expected: str
+    measured: str
+    passed: bool
 
 
 @dataclass(frozen=True, slots=True)
@@ -100,6 +119,8 @@ class RunSummary:
         notes: what the scenario's import and the world found (CommonRoad files: time
             step corrections, overlapping recorded shapes, recordings beyond tyre
             friction...).
+        expectations: the scenario's ``[expect]`` items checked against this run
+            (empty if it expects nothing).
     """
 
     scenario: str
@@ -132,6 +153,14 @@ class RunSummary:
     timings: dict[str, float] = field(default_factory=dict)
     extra_metrics: dict[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    expectations: tuple[ExpectationResult, ...] = ()
+
+    @property
+    def verdict(self) -> str:
+        """``pass`` (every expectation met), ``fail`` (one is not) or ``none`` (nothing expected)."""
+        if not self.expectations:
+            return "none"
+        return "pass" if all(e.passed for e in self.expectations) else "fail"
 
     @property
     def ego_collisions(self) -> tuple[ImpactRecord, ...]:
@@ -168,7 +197,7 @@ class RunSummary:
 #: Summary fields the loop fills itself; a metric may not set them.
 _LOOP_FIELDS = frozenset(
     {"scenario", "planner", "seed", "outcome", "reason", "duration", "steps", "cycles"}
-    | {"bodies", "collisions", "ego_collided", "timings", "extra_metrics", "notes"}
+    | {"bodies", "collisions", "ego_collided", "timings", "extra_metrics", "notes", "expectations"}
 )
 
 

@@ -35,7 +35,7 @@ from mujoco_world.physics.control import (
 from mujoco_world.physics.impact import ImpactMeasurement, ImpactRecorder
 from mujoco_world.physics.scene import BodyProxy, Scene
 from mujoco_world.scenario.recorded_tracks import RECORDED_ACCEL_CAP, RecordedTracks
-from mujoco_world.scenario.road import StaticBox, build_road
+from mujoco_world.scenario.road import StaticBox, box_footprint, build_road, debris_boxes
 from mujoco_world.scenario.spec import BehaviourKind, Boundary, RoadKind, RoadName, RouteSpec, Scenario
 
 #: Where bodies that are not in the world (yet, or any more) wait [m]: far from every
@@ -164,14 +164,20 @@ class World:
                 u.name,
                 u.type,
                 *u.shape,
-                u.mass,
+                u.body_mass,
                 kerbs=False if is_recorded or (on_map and u.behaviour.kind is BehaviourKind.PARKED) else None,
             )
             for u, is_recorded in zip(users, recorded, strict=True)
         ]
-        statics = self.road.static_boxes() + tuple(
-            StaticBox((o.x, o.y), 0.5 * o.length, 0.5 * o.width, 0.75, o.yaw, Boundary.WALL)
-            for o in scenario.obstacles
+        #: Static boxes of the scenario's debris (they also stop every body; the planner perceives them).
+        self.debris = debris_boxes(self.road, scenario.debris)
+        statics = (
+            self.road.static_boxes()
+            + tuple(
+                StaticBox((o.x, o.y), 0.5 * o.length, 0.5 * o.width, 0.75, o.yaw, Boundary.WALL)
+                for o in scenario.obstacles
+            )
+            + self.debris
         )
         _check_step_size(scenario, proxies, timestep)
         self.scene = Scene(proxies, statics, scenario.contact, timestep)
@@ -232,6 +238,8 @@ class World:
             pk,
         )
         self.crashed = np.zeros(self.n, dtype=bool)
+        #: Pose (x, y, yaw) where each body last left the world, (n, 3) (nan if it never left).
+        self.exit_pose = np.full((self.n, 3), math.nan)
         self.ego_crash_time: float | None = None
         self._track_sq = 0.0
         self._track_max = 0.0
@@ -331,7 +339,7 @@ class World:
         return self.scene.names[entity] if entity >= 0 else f"a {self.scene.static_kind}"
 
     def environment(self) -> RoadEnvironment:
-        """The road as the planner sees it: the ego route, lanes, drivable area."""
+        """The road as the planner sees it: the ego route, lanes, drivable area (minus debris)."""
         spec = self.scenario.road
         if spec.map is not None:
             width, offsets = spec.map.lane_width, spec.map.lane_offsets
@@ -339,9 +347,13 @@ class World:
             lane = self.scenario.ego.lane
             width = spec.lane_width
             offsets = tuple((k - lane) * spec.lane_width for k in range(spec.lanes))
+        area = self.road.drivable_area
+        if self.debris:
+            # Debris is a hole in the drivable area: the planner keeps off it as off the road's edges.
+            area = area.difference(shapely.union_all([box_footprint(b) for b in self.debris]))
         return RoadEnvironment(
             reference_path=self.ego_path,
-            drivable_area=self.road.drivable_area,
+            drivable_area=area,
             lane_width=width,
             lane_offsets=offsets,
             speed_limit=spec.speed_limit,
@@ -599,13 +611,16 @@ class World:
         scene.ctrl[:] = ctrl
 
     def _update_presence(self, t: float) -> None:
-        """Let recorded road users enter and leave the world at ``t`` [s].
+        """Let road users enter and leave the world at ``t`` [s].
 
+        Recorded road users exist while their recording lasts; route-following road
+        users leave once their body has passed their route's end (``Fleet.presence``).
         A body enters at its reference state (position, heading, velocity) with its
         contacts on, unless it would appear inside another body: then it waits as a
         ghost (no contacts, following its reference) until it is clear, and the
         presence events say so. A body leaves by losing its contacts and being parked
-        far away; a crashed body stays (a wreck does not vanish).
+        far away (its pose when it left is kept in ``exit_pose``); a crashed body stays
+        (a wreck does not vanish).
         """
         want = np.ones(self.n, dtype=bool)
         want[1:] = self.fleet.presence(t)
@@ -615,6 +630,7 @@ class World:
         leave = self.present & ~want
         if leave.any():
             rows = np.flatnonzero(leave)
+            self.exit_pose[rows] = scene.qpos[rows]
             scene.set_contacts(rows, False)
             scene.qpos[rows, :2] = self._park[rows]
             scene.qvel[rows] = 0.0

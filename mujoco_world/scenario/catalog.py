@@ -22,7 +22,9 @@ import numpy as np
 from mujoco_world.scenario.spec import (
     BehaviourSpec,
     CrossingSpec,
+    DebrisSpec,
     EgoSpec,
+    ExpectSpec,
     IdmSpec,
     LegalSpec,
     RoadSpec,
@@ -529,6 +531,60 @@ def dilemma_pedestrian_car(rng: np.random.Generator | None = None) -> Scenario:
     )
 
 
+def child_between_parked(rng: np.random.Generator | None = None) -> Scenario:
+    """A child runs out between two parked cars at 30 km/h; the ego must not hit it."""
+    draw = _Draw(rng)
+    road = RoadSpec(length=160.0, speed_limit=8.4, parking_width=2.5)
+    kerb_y = -(road.half_width + road.parking_width + road.shoulder)
+    gap_x = draw(62.0, 55.0, 70.0)
+    parked_offset = -(0.5 * road.lane_width + 0.5 * road.parking_width)
+    cars = tuple(
+        _user(name, "parked_vehicle", RouteSpec(lane=0, offset=parked_offset), x, _parked())
+        for name, x in (("parked_rear", gap_x - 3.6), ("parked_front", gap_x + 3.6))
+    )
+    child = _user(
+        "child",
+        "child",
+        RouteSpec(road="waypoints", waypoints=((gap_x, kerb_y + 0.6), (gap_x, 9.0))),
+        0.0,
+        _scripted(0.0, trigger_distance=draw(24.0, 20.0, 30.0), speed_profile=((0.0, 0.0), (0.5, 3.0))),
+    )
+    return Scenario(
+        name="child_between_parked",
+        description="a child (23 kg, 0.3 m) runs out between two parked cars; ego at 30 km/h",
+        road=road,
+        sensor=SensorSpec(occlusion=True),
+        ego=EgoSpec(s0=10.0, speed=draw(8.3, 7.0, 8.4), goal_s=140.0),
+        road_users=(*cars, child),
+        duration=20.0,
+        expect=ExpectSpec(ego_collision=False, max_vulnerable_harm=0.0),
+    )
+
+
+def debris_on_lane(rng: np.random.Generator | None = None) -> Scenario:
+    """Debris blocks the ego's lane; oncoming cars pass and leave the road at its end."""
+    draw = _Draw(rng)
+    road = RoadSpec(length=220.0, speed_limit=13.9, boundary="wall")
+    lane_y = -0.5 * road.lane_width
+    debris = DebrisSpec(
+        "fallen_load", s=draw(90.0, 75.0, 110.0), offset=lane_y, length=1.2, width=draw(1.4, 1.0, 1.8)
+    )
+    oncoming = tuple(
+        _user(f"oncoming_{k}", "car", RouteSpec(lane=0, direction=-1), s0, _idm(draw(12.0, 10.0, 13.9)))
+        for k, s0 in enumerate((draw(60.0, 40.0, 80.0), draw(100.0, 85.0, 125.0)))
+    )
+    return Scenario(
+        name="debris_on_lane",
+        description="a fallen load lies in the ego lane; oncoming cars pass and leave at the road's end",
+        road=road,
+        ego=EgoSpec(s0=10.0, speed=draw(12.0, 10.0, 13.9), goal_s=200.0),
+        road_users=oncoming,
+        debris=(debris,),
+        duration=30.0,
+        expect=ExpectSpec(ego_collision=False, reach_goal=True),
+    )
+
+
 # --------------------------------------------------------------------------- registry
 
 
@@ -557,6 +613,8 @@ _FAMILIES = (
     curve_truck,
     dense_urban,
     dilemma_pedestrian_car,
+    child_between_parked,
+    debris_on_lane,
 )
 
 #: Name -> family, in catalog order.

@@ -17,7 +17,7 @@ import shapely
 from shapely.geometry import LineString, MultiLineString, MultiPolygon, Polygon, box
 
 from ethical_planner.validation import check
-from mujoco_world.scenario.spec import Boundary, RoadKind, RoadName, RoadSpec, RouteSpec, Turn
+from mujoco_world.scenario.spec import Boundary, DebrisSpec, RoadKind, RoadName, RoadSpec, RouteSpec, Turn
 
 #: Spacing of sampled centre lines [m].
 _SAMPLE_M = 1.0
@@ -179,6 +179,53 @@ class RoadGeometry:
                     )
                 )
         return tuple(boxes)
+
+
+#: Height of debris boxes [m] (pictures only: the world is planar).
+DEBRIS_HEIGHT_M = 0.5
+
+
+def debris_boxes(road: RoadGeometry, debris: tuple[DebrisSpec, ...]) -> tuple[StaticBox, ...]:
+    """Static boxes of debris placed along the main road's reference line.
+
+    Args:
+        road: the built road.
+        debris: debris of the scenario (``s`` along the main line from its start,
+            ``offset`` left of it).
+
+    Returns:
+        One ``StaticBox`` of kind wall per piece (it stops every body).
+    """
+    if not debris:
+        return ()
+    line = road.main_line
+    seg = np.diff(line, axis=0)
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(seg[:, 0], seg[:, 1]))])
+    s = np.array([d.s for d in debris])
+    x = np.interp(s, arc, line[:, 0])
+    y = np.interp(s, arc, line[:, 1])
+    k = np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(seg) - 1)
+    theta = np.arctan2(seg[k, 1], seg[k, 0])
+    offset = np.array([d.offset for d in debris])
+    cx, cy = x - offset * np.sin(theta), y + offset * np.cos(theta)
+    return tuple(
+        StaticBox(
+            center=(float(cx[i]), float(cy[i])),
+            half_length=0.5 * d.length,
+            half_width=0.5 * d.width,
+            half_height=0.5 * DEBRIS_HEIGHT_M,
+            yaw=float(theta[i] + math.radians(d.yaw)),
+            kind=Boundary.WALL,
+        )
+        for i, d in enumerate(debris)
+    )
+
+
+def box_footprint(b: StaticBox) -> Polygon:
+    """The footprint of a static box as a polygon [m]."""
+    c, s = math.cos(b.yaw), math.sin(b.yaw)
+    corners = [(sx * b.half_length, sy * b.half_width) for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
+    return Polygon([(b.center[0] + u * c - v * s, b.center[1] + u * s + v * c) for u, v in corners])
 
 
 def _arm_of_heading(heading: float) -> tuple[RoadName, int]:

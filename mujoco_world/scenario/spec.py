@@ -13,7 +13,7 @@ are measured along a road user's own route from its start.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from enum import StrEnum
 from pathlib import Path
 from typing import Any
@@ -86,6 +86,18 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "contact.friction": (0.0, 2.0, "-"),
     "restitution.speed_scale": (0.1, 100.0, "m/s"),
     "sensor.range": (1.0, 2000.0, "m"),
+    "debris.s": (0.0, 20000.0, "m"),
+    "debris.offset": (-20.0, 20.0, "m"),
+    "debris.length": (0.1, 20.0, "m"),
+    "debris.width": (0.1, 10.0, "m"),
+    "debris.yaw": (-180.0, 180.0, "deg"),
+    "expect.max_ego_harm": (0.0, 1000.0, "-"),
+    "expect.max_third_party_harm": (0.0, 1000.0, "-"),
+    "expect.max_vulnerable_harm": (0.0, 1000.0, "-"),
+    "expect.min_distance": (-10.0, 1000.0, "m"),
+    "expect.min_distance_vulnerable": (-10.0, 1000.0, "m"),
+    "expect.min_ttc": (0.0, 100.0, "s"),
+    "expect.min_progress": (0.0, 20000.0, "m"),
 }
 #: Most road users of one scenario (``Scenario.road_users``).
 MAX_ROAD_USERS = 2000
@@ -475,6 +487,15 @@ class LegalSpec:
         )
 
 
+#: Road-user kinds a scenario may name beyond ``RoadUserType``: name -> (the type the
+#: planner, the physics and the harm model see, default (length, width) [m], default
+#: mass [kg]). A child is a pedestrian for the CRSS harm model (the model has no age
+#: term); only its body is smaller and lighter (a 6-7 year old: 23 kg, 0.3 m wide).
+SCENARIO_KINDS: dict[str, tuple[RoadUserType, tuple[float, float], float]] = {
+    "child": (RoadUserType.PEDESTRIAN, (0.3, 0.3), 23.0),
+}
+
+
 @dataclass(frozen=True, slots=True)
 class RoadUserSpec:
     """One road user: its proxy body, route, behaviour and legal corridor.
@@ -490,6 +511,8 @@ class RoadUserSpec:
         behaviour: how it moves.
         legal: its legal corridor (rule violations become visible against it), or
             None to let the planner derive one.
+        kind: a finer kind of its type from ``SCENARIO_KINDS`` ("child"), or None.
+            ``type = "child"`` in a file sets ``type = "pedestrian", kind = "child"``.
     """
 
     name: str
@@ -501,13 +524,33 @@ class RoadUserSpec:
     mass: float | None = None
     behaviour: BehaviourSpec = field(default_factory=BehaviourSpec)
     legal: LegalSpec | None = None
+    kind: str | None = None
 
     def __post_init__(self) -> None:
         check(
             isinstance(self.name, str) and self.name.isidentifier(),
             f"road user name must be an identifier (letters, digits, _), got {self.name!r}",
         )
-        object.__setattr__(self, "type", parse_enum(RoadUserType, self.type, "road-user type", "type"))
+        if isinstance(self.type, str) and self.type in SCENARIO_KINDS:
+            check(
+                self.kind in (None, self.type),
+                f"road_user.kind: type {self.type!r} cannot have kind {self.kind!r}",
+            )
+            object.__setattr__(self, "kind", str(self.type))
+            object.__setattr__(self, "type", SCENARIO_KINDS[self.type][0])
+        types = [t.value for t in RoadUserType if t is not RoadUserType.TRAIN]
+        allowed = ", ".join([*types, *SCENARIO_KINDS])
+        try:
+            kind = parse_enum(RoadUserType, self.type, "road-user type", "type")
+        except ValueError:
+            raise ValueError(f"road_user.type must be one of {allowed}; got {self.type!r}") from None
+        object.__setattr__(self, "type", kind)
+        if self.kind is not None:
+            check(
+                self.kind in SCENARIO_KINDS and SCENARIO_KINDS[self.kind][0] is kind,
+                f"road_user.kind must be one of {sorted(SCENARIO_KINDS)} with its type, got {self.kind!r} "
+                f"for type {kind.value!r}",
+            )
         check_finite("road_user", s0=self.s0)
         check_positive("road_user", length=self.length, width=self.width, mass=self.mass)
         check_plausible("road_user", self)
@@ -516,12 +559,22 @@ class RoadUserSpec:
 
     @property
     def shape(self) -> tuple[float, float]:
-        """(length, width) of the footprint [m]."""
-        default = DEFAULT_SHAPES[self.type]
+        """(length, width) of the footprint [m] (the kind's or the type's default unless given)."""
+        if self.kind is not None:
+            default_length, default_width = SCENARIO_KINDS[self.kind][1]
+        else:
+            default_length, default_width = DEFAULT_SHAPES[self.type].length, DEFAULT_SHAPES[self.type].width
         return (
-            self.length if self.length is not None else default.length,
-            self.width if self.width is not None else default.width,
+            self.length if self.length is not None else default_length,
+            self.width if self.width is not None else default_width,
         )
+
+    @property
+    def body_mass(self) -> float | None:
+        """The mass given, else the kind's default mass [kg], else None (the type's mass)."""
+        if self.mass is not None:
+            return self.mass
+        return SCENARIO_KINDS[self.kind][2] if self.kind is not None else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -772,6 +825,115 @@ class SensorSpec:
 
 
 @dataclass(frozen=True, slots=True)
+class DebrisSpec:
+    """A static obstacle lying on the road (a fallen load, a rock): immovable.
+
+    Debris is part of the road, not a road user: the physics holds it fixed like a
+    wall (infinite mass, it stops every body), the planner sees it as a hole in the
+    drivable area (as it sees the road's edges), and a collision with it is a
+    collision with a static obstacle (the ego's harm as for a wall; debris has no
+    harm of its own).
+
+    Attributes:
+        name: identifier (unique among debris).
+        s: arc length of its centre along the main road's reference line [m].
+        offset: lateral position of its centre from the reference line [m], positive
+            left of the reference direction.
+        length: along the road [m]. width: across the road [m].
+        yaw: heading relative to the road [deg].
+    """
+
+    name: str
+    s: float
+    offset: float = 0.0
+    length: float = 0.8
+    width: float = 0.6
+    yaw: float = 0.0
+
+    def __post_init__(self) -> None:
+        check(
+            isinstance(self.name, str) and self.name.isidentifier(),
+            f"debris name must be an identifier (letters, digits, _), got {self.name!r}",
+        )
+        check_finite("debris", s=self.s, offset=self.offset, yaw=self.yaw)
+        check_positive("debris", length=self.length, width=self.width)
+        check_plausible("debris", self)
+
+
+@dataclass(frozen=True, slots=True)
+class ExpectSpec:
+    """What a scenario expects of a run: each given item is checked and reported pass/fail.
+
+    Items left out (None, or an empty ``outcome``) are not checked. See
+    ``mujoco_world.evaluation.expectations`` for how each is measured.
+
+    Attributes:
+        outcome: accepted run outcomes (one name or a list).
+        reach_goal: the ego reaches its goal (outcome ``goal``).
+        ego_collision: the ego takes part in a collision.
+        collision: any collision happens (the ego's or others').
+        max_collisions: at most this many measured collisions.
+        max_ego_harm, max_third_party_harm, max_vulnerable_harm: at most this much
+            measured harm in the group (the summary's ``harm``).
+        min_distance: the ego keeps at least this distance to every road user [m].
+        min_distance_vulnerable: the same to vulnerable road users [m].
+        min_ttc: the ego's time-to-collision stays at least this long [s].
+        min_progress: the ego gets at least this far along its route [m].
+    """
+
+    outcome: str | tuple[str, ...] = ()
+    reach_goal: bool | None = None
+    ego_collision: bool | None = None
+    collision: bool | None = None
+    max_collisions: int | None = None
+    max_ego_harm: float | None = None
+    max_third_party_harm: float | None = None
+    max_vulnerable_harm: float | None = None
+    min_distance: float | None = None
+    min_distance_vulnerable: float | None = None
+    min_ttc: float | None = None
+    min_progress: float | None = None
+
+    def __post_init__(self) -> None:
+        outcome = (self.outcome,) if isinstance(self.outcome, str) else tuple(self.outcome)
+        from mujoco_world.loop.summary import OUTCOMES  # the loop's outcome names
+
+        bad = [o for o in outcome if o not in OUTCOMES]
+        check(not bad, f"expect.outcome must name outcomes among {', '.join(OUTCOMES)}, got {bad}")
+        object.__setattr__(self, "outcome", outcome)
+        for name in ("reach_goal", "ego_collision", "collision"):
+            value = getattr(self, name)
+            check(
+                value is None or isinstance(value, bool),
+                f"expect.{name} must be true or false, got {value!r}",
+            )
+        check(
+            self.max_collisions is None
+            or (isinstance(self.max_collisions, int) and not isinstance(self.max_collisions, bool))
+            and self.max_collisions >= 0,
+            f"expect.max_collisions must be an integer >= 0, got {self.max_collisions!r}",
+        )
+        check_finite(
+            "expect",
+            max_ego_harm=self.max_ego_harm,
+            max_third_party_harm=self.max_third_party_harm,
+            max_vulnerable_harm=self.max_vulnerable_harm,
+            min_distance=self.min_distance,
+            min_distance_vulnerable=self.min_distance_vulnerable,
+            min_ttc=self.min_ttc,
+            min_progress=self.min_progress,
+        )
+        check_plausible("expect", self)
+
+    @property
+    def empty(self) -> bool:
+        """True if nothing is expected."""
+        return not self.outcome and all(
+            getattr(self, f.name) is None for f in fields(self) if f.name != "outcome"
+        )
+
+
+@dataclass(frozen=True, slots=True)
 class Scenario:
     """A complete scenario.
 
@@ -784,9 +946,11 @@ class Scenario:
         duration: time limit [s].
         contact: contact model.
         sensor: what the ego perceives (occlusion, range).
-        obstacles: fixed obstacles (bodies that never move).
+        obstacles: fixed obstacles (bodies that never move; the planner does not perceive them).
         notes: what made the scenario (an importer's decisions and findings), for
             summaries and reports.
+        debris: static obstacles placed along the road (the planner perceives them).
+        expect: what a run should give (checked and reported pass/fail), or None.
     """
 
     name: str
@@ -799,6 +963,8 @@ class Scenario:
     sensor: SensorSpec = field(default_factory=SensorSpec)
     obstacles: tuple[ObstacleSpec, ...] = ()
     notes: tuple[str, ...] = ()
+    debris: tuple[DebrisSpec, ...] = ()
+    expect: ExpectSpec | None = None
 
     def __post_init__(self) -> None:
         check(
@@ -844,6 +1010,16 @@ class Scenario:
                     f"road_users[{i}] ({user.name}).route.lane must be 0 on a map road "
                     "(its main route is the reference path shifted by route.offset)",
                 )
+        object.__setattr__(self, "debris", tuple(self.debris))
+        debris_names = [d.name for d in self.debris]
+        twice = sorted({n for n in debris_names if debris_names.count(n) > 1})
+        check(not twice, f"debris: duplicate names {twice}")
+        for i, piece in enumerate(self.debris):
+            check(
+                piece.s <= length,
+                f"debris[{i}] ({piece.name}).s must lie on the road (<= road.length {length:g} m), "
+                f"got {piece.s}",
+            )
         lanes = self.road.lanes
         check(self.ego.lane < lanes, f"ego.lane must be < road.lanes ({lanes}), got {self.ego.lane}")
         if self.road.kind is not RoadKind.INTERSECTION:

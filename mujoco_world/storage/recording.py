@@ -132,6 +132,7 @@ LEVEL_COLORS: dict[int, tuple[int, int, int, int]] = {
 }
 _ELLIPSE_POINTS = 25
 _Z_LINE = 0.05  # lines slightly above the road surface [m]
+_Z_GONE = -50.0  # height of bodies out of the world: out of sight below the road [m]
 
 
 @dataclass(frozen=True, slots=True)
@@ -662,7 +663,13 @@ class RerunRecorder(RunObserver):
         rec = self._stream()
         layout = self._bodies
         qpos = world.scene.qpos
-        centers = np.column_stack([qpos[:, :2], layout.z])
+        gone = ~world.present
+        if gone.any():
+            # A body out of the world sinks below the road where it left (one that has not
+            # entered yet, below the ego), not drawn where it is parked far away.
+            hidden = np.where(np.isnan(world.exit_pose), qpos[0], world.exit_pose)
+            qpos = np.where(gone[:, None], hidden, qpos)
+        centers = np.column_stack([qpos[:, :2], np.where(gone, _Z_GONE, layout.z)])
         quaternions = yaw_quaternions(qpos[:, 2])
         self._path_xy.append(qpos[0, :2].copy())
         rec.log("world/ego", rr.Boxes3D.from_fields(centers=centers[:1], quaternions=quaternions[:1]))

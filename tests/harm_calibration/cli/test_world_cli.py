@@ -117,3 +117,42 @@ def test_a_failing_run_is_recorded_and_the_batch_goes_on(tmp_path):
     assert read_record(tasks[0].record_path).summary.outcome == "failed"
     assert "failed 1" in comparison_table(r.record for r in results)
     assert [r.run_id for r in read_index(tmp_path)] == [tasks[0].run_id, tasks[1].run_id]
+
+
+EXPECTING = """
+name = "{name}"
+duration = {duration}
+[road]
+length = 100.0
+[ego]
+s0 = 10.0
+speed = 5.0
+[expect]
+collision = false
+min_progress = 90.0
+"""
+
+
+def test_run_reports_expectations_and_exits_1_when_one_fails(tmp_path, capsys):
+    scenario = write_scenario(tmp_path, template=EXPECTING, name="expecting", duration=0.5)
+    code = main(["run", scenario, "--planner", "keep_lane", "--out", str(tmp_path / "r"), "--no-record"])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "expectations: FAIL" in out
+    assert "pass  collision: expected false, got false" in out
+    assert "FAIL  min_progress: expected >= 90, got 12.5" in out
+
+
+def test_scenarios_json_lists_expectations(capsys):
+    assert main(["scenarios", "--json"]) == 0
+    entries = {e["name"]: e for e in json.loads(capsys.readouterr().out)}
+    assert entries["child_between_parked"]["expect"] == {"ego_collision": False, "max_vulnerable_harm": 0.0}
+    assert entries["oncoming_drift"]["expect"] == {}
+
+
+def test_comparison_table_shows_the_test_suite(tmp_path):
+    scenario = write_scenario(tmp_path, template=EXPECTING, name="expecting", duration=0.3)
+    (result,) = run_batch([RunTask(scenario, "keep_lane", 0, str(tmp_path / "b"), record=False)], workers=1)
+    table = comparison_table([result.record])
+    assert "FAIL" in table.splitlines()[2]
+    assert "keep_lane   0 pass   1 fail   0 none  | failing: expecting" in table
