@@ -26,8 +26,9 @@ from ethical_planner.geometry import rectangle_half_extent
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.registry import Registry
 from ethical_planner.road_users import LegalCorridor, RoadUserType
+from mujoco_world.evaluation.safety import time_to_collision
 from mujoco_world.scenario.recorded_tracks import RecordedTracks
-from mujoco_world.scenario.spec import BehaviourKind, RoadUserSpec
+from mujoco_world.scenario.spec import ActionSpec, BehaviourKind, ConditionSpec, RoadUserSpec
 
 #: Resampling step of the routes [m].
 ROUTE_STEP_M = 0.25
@@ -138,6 +139,7 @@ class WorldView:
         time: [s].
         position: (n, 2) [m]. velocity: (n, 2) [m/s]. yaw: (n,) [rad].
         length: (n,) [m]. width: (n,) [m]. types: road-user types, length n.
+        ego_s: the ego's arc length along its route [m] (nan unless a script reads it).
     """
 
     time: float
@@ -147,6 +149,7 @@ class WorldView:
     length: np.ndarray
     width: np.ndarray
     types: tuple[RoadUserType, ...]
+    ego_s: float = math.nan
 
 
 class Fleet:
@@ -157,6 +160,7 @@ class Fleet:
         routes: route polylines in the same order, each (n_i, 2) [m].
         road_speed_limit: [m/s], for legal corridors without their own limit.
         tick: behaviour period [s].
+        lane_width: [m], for scripted lane changes.
     """
 
     def __init__(
@@ -165,6 +169,7 @@ class Fleet:
         routes: Sequence[np.ndarray],
         road_speed_limit: float,
         tick: float = 0.05,
+        lane_width: float = 3.5,
     ) -> None:
         self.specs = tuple(specs)
         self.k = len(self.specs)
@@ -197,6 +202,8 @@ class Fleet:
             idm = u.behaviour.idm
             ticks = int(round(idm.reaction_time / self.tick)) if idm is not None else 0
             self.delay.append(deque([0.0] * ticks) if ticks > 0 else None)
+        self.lane_width = float(lane_width)
+        self.script = Script(self.specs)
         self._kind = [u.behaviour.kind for u in self.specs]
         self._models_by_kind = {kind: BEHAVIOURS.get(kind.value) for kind in dict.fromkeys(self._kind)}
         self._kind_mask = {kind: np.array([k is kind for k in self._kind]) for kind in self._models_by_kind}
@@ -319,10 +326,20 @@ class Fleet:
                 me = view.position[i + 1]
                 if trigger is None or math.hypot(*(ego_pos - me)) <= trigger:
                     self.activated_at[i] = t
+                    self.script.armed_at[i] = t
             since = t - self.activated_at[i]
             kind = self._kind[i]
             model = self._models_by_kind[kind]
-            if model.moves and math.isfinite(since) and b.lateral:
+            if math.isfinite(since) and self.script.pending(i):
+                self.script.advance(self, i, view)
+            lateral = self.script.lateral[i]
+            if model.moves and lateral is not None:
+                t0, lateral_knots = lateral
+                d_next, _, _ = smoothstep_profile(lateral_knots, t - t0 + self.tick)
+                _, _, accel = smoothstep_profile(lateral_knots, t - t0)
+                self.d_rate[i] = (d_next - self.d[i]) / self.tick
+                self.d_accel[i] = accel
+            elif model.moves and math.isfinite(since) and b.lateral:
                 d_next, _, _ = smoothstep_profile(b.lateral, since + self.tick)
                 _, _, accel = smoothstep_profile(b.lateral, since)
                 self.d_rate[i] = (d_next - self.d[i]) / self.tick
@@ -336,6 +353,10 @@ class Fleet:
         b = self.specs[i].behaviour
         if not math.isfinite(since):
             return b.speed
+        program = self.script.longitudinal[i]
+        if program is not None:
+            t0, speed_knots = program
+            return linear_profile(speed_knots, self.activated_at[i] + since - t0, b.speed)
         return linear_profile(b.speed_profile, since, b.speed)
 
     # ------------------------------------------------------------------ legal corridors
@@ -356,6 +377,107 @@ class Fleet:
             limit = legal.speed_limit if legal.speed_limit is not None else self.road_speed_limit
             out.append(LegalCorridor(limit, legal.lateral_half_width, stop))
         return out
+
+
+class Script:
+    """The road users' scripts (``BehaviourSpec.events``): conditions checked in order.
+
+    Event k of a road user is armed once event k - 1 has fired (the first at the road
+    user's activation) and fires once, at the first behaviour tick where every
+    condition of its ``when`` holds. Its ``do`` then replaces the road user's speed
+    program (``longitudinal``: (t0, knots)) and/or its lateral program (``lateral``:
+    (t0, knots)), both starting from the state at the event.
+
+    Attributes:
+        next: (k,) index of each road user's next event.
+        armed_at: (k,) time the next event was armed [s] (inf before activation).
+        fired: per road user, the times its events fired [s].
+        longitudinal: per road user, the speed program set by its last speed action.
+        lateral: per road user, the offset program set by its last lateral action.
+    """
+
+    def __init__(self, specs: Sequence[RoadUserSpec]) -> None:
+        self.events = [u.behaviour.events for u in specs]
+        k = len(self.events)
+        self.next = np.zeros(k, dtype=np.int64)
+        self.armed_at = np.full(k, math.inf)
+        self.fired: list[list[float]] = [[] for _ in range(k)]
+        self.longitudinal: list[tuple[float, tuple[tuple[float, float], ...]] | None] = [None] * k
+        self.lateral: list[tuple[float, tuple[tuple[float, float], ...]] | None] = [None] * k
+        self.index = {"ego": 0, **{u.name: i + 1 for i, u in enumerate(specs)}}
+        self.needs_ego_s = any(e.when.needs_ego_s for events in self.events for e in events)
+
+    def pending(self, i: int) -> bool:
+        """True if road user ``i`` has an event left."""
+        return self.next[i] < len(self.events[i])
+
+    def advance(self, fleet: Fleet, i: int, view: WorldView) -> None:
+        """Fire road user ``i``'s next event if its conditions hold at ``view.time``."""
+        event = self.events[i][self.next[i]]
+        if not self._holds(event.when, fleet, i, view):
+            return
+        t = view.time
+        self._apply(event.do, fleet, i, t)
+        self.fired[i].append(t)
+        self.next[i] += 1
+        self.armed_at[i] = t
+
+    def _holds(self, when: ConditionSpec, fleet: Fleet, i: int, view: WorldView) -> bool:
+        t = view.time
+        if when.time is not None and t < when.time - 1e-9:
+            return False
+        if when.delay is not None and t - self.armed_at[i] < when.delay - 1e-9:
+            return False
+        me = i + 1
+        if when.distance_below is not None or when.distance_above is not None or when.ttc_below is not None:
+            j = self.index[when.to]
+            distance = float(np.hypot(*(view.position[me] - view.position[j])))
+            if when.distance_below is not None and not distance < when.distance_below:
+                return False
+            if when.distance_above is not None and not distance > when.distance_above:
+                return False
+            if when.ttc_below is not None and not _ttc(view, me, j, when.ttc_below) < when.ttc_below:
+                return False
+        j = me if when.of == "self" else self.index[when.of]
+        s = view.ego_s if j == 0 else float(fleet.s[j - 1])
+        if when.s_above is not None and not s > when.s_above:
+            return False
+        if when.s_below is not None and not s < when.s_below:
+            return False
+        speed = float(np.hypot(*view.velocity[j]))
+        if when.speed_above is not None and not speed > when.speed_above:
+            return False
+        return when.speed_below is None or speed < when.speed_below
+
+    def _apply(self, do: ActionSpec, fleet: Fleet, i: int, t: float) -> None:
+        v0 = float(fleet.v[i])
+        if do.speed is not None:
+            target = do.speed
+        elif do.stop:
+            target = 0.0
+        elif do.start:
+            target = fleet.specs[i].behaviour.speed
+        else:
+            target = None
+        if target is not None:
+            ramp = abs(target - v0) / do.acceleration
+            knots = ((0.0, v0), (ramp, target)) if ramp > 0 else ((0.0, target),)
+            self.longitudinal[i] = (t, knots)
+        elif do.speed_profile:
+            profile = do.speed_profile
+            self.longitudinal[i] = (t, profile if profile[0][0] == 0 else ((0.0, v0), *profile))
+        d0 = float(fleet.d[i])
+        if do.change_lane:
+            self.lateral[i] = (t, ((0.0, d0), (do.duration, d0 + do.change_lane * fleet.lane_width)))
+        elif do.lateral:
+            lateral = do.lateral
+            self.lateral[i] = (t, lateral if lateral[0][0] == 0 else ((0.0, d0), *lateral))
+
+
+def _ttc(view: WorldView, a: int, b: int, horizon: float) -> float:
+    """Constant-velocity time-to-collision [s] of bodies ``a`` and ``b`` (inf: none within horizon)."""
+    states = np.column_stack([view.position, view.yaw, view.velocity, view.length, view.width])
+    return float(time_to_collision(states[a], states[b][None, :], horizon + 1e-6)[0])
 
 
 class BehaviourModel(Protocol):

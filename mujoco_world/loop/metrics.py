@@ -336,6 +336,24 @@ class Progress(Metric):
         return {"progress": run.world.ego_progress()}
 
 
+class ScriptEvents(Metric):
+    """When each road user's scripted events fired (``BehaviourSpec.events``).
+
+    Value: ``script_events`` (road user name -> fire times [s], in script order), only
+    for road users with a script; nothing for scenarios without scripts.
+    """
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``script_events`` in ``extra_metrics``."""
+        fleet = run.world.fleet
+        fired = {
+            spec.name: [round(t, 6) for t in fleet.script.fired[i]]
+            for i, spec in enumerate(fleet.specs)
+            if spec.behaviour.events
+        }
+        return {"script_events": fired} if fired else {}
+
+
 def default_metrics(config: RunConfig) -> tuple[Metric, ...]:
     """The built-in metrics (every metric field of ``RunSummary``)."""
     return (
@@ -348,4 +366,5 @@ def default_metrics(config: RunConfig) -> tuple[Metric, ...]:
         HarmPerGroup(),
         TrackingError(),
         Progress(),
+        ScriptEvents(),
     )

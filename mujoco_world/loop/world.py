@@ -154,7 +154,7 @@ class World:
             _STAND_IN_ROUTE if is_recorded else self.road.route(u.route)
             for u, is_recorded in zip(users, recorded, strict=True)
         ]
-        self.fleet = Fleet(users, routes, scenario.road.speed_limit, behaviour_tick)
+        self.fleet = Fleet(users, routes, scenario.road.speed_limit, behaviour_tick, scenario.road.lane_width)
         proxies = [BodyProxy("ego", ego.type, ego.length, ego.width, ego.mass)]
         # A recorded body's recording already says where it went, and a mapped road's
         # parked bodies may stand on the kerb (pavement parking): kerbs do not stop them.
@@ -425,6 +425,7 @@ class World:
             length=self.lengths,
             width=self.widths,
             types=self.types,
+            ego_s=self.ego_progress() if self.fleet.script.needs_ego_s else math.nan,
         )
 
     def _sample_history(self) -> None:

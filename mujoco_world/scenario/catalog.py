@@ -20,10 +20,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from mujoco_world.scenario.spec import (
+    ActionSpec,
     BehaviourSpec,
+    ConditionSpec,
     CrossingSpec,
     DebrisSpec,
     EgoSpec,
+    EventSpec,
     ExpectSpec,
     IdmSpec,
     LegalSpec,
@@ -585,6 +588,38 @@ def debris_on_lane(rng: np.random.Generator | None = None) -> Scenario:
     )
 
 
+def cut_in_and_brake(rng: np.random.Generator | None = None) -> Scenario:
+    """A scripted car cuts in, brakes hard to a stop, then drives off again."""
+    draw = _Draw(rng)
+    events = (
+        EventSpec(
+            when=ConditionSpec(distance_below=draw(24.0, 18.0, 30.0)),
+            do=ActionSpec(change_lane=1, duration=draw(2.0, 1.5, 3.0)),
+        ),
+        EventSpec(when=ConditionSpec(delay=draw(2.5, 2.0, 3.5)), do=ActionSpec(stop=True, acceleration=6.0)),
+        EventSpec(
+            when=ConditionSpec(speed_below=0.5, delay=draw(1.5, 1.0, 3.0)),
+            do=ActionSpec(start=True, acceleration=2.0),
+        ),
+    )
+    cutter = _user(
+        "cutter",
+        "car",
+        RouteSpec(lane=0),
+        draw(40.0, 30.0, 50.0),
+        BehaviourSpec(kind="scripted", speed=draw(16.0, 14.0, 18.0), events=events),
+    )
+    return Scenario(
+        name="cut_in_and_brake",
+        description="a car cuts in when the ego is 24 m behind, brakes to a stop at 6 m/s^2, then goes",
+        road=RoadSpec(length=400.0, lanes=2, speed_limit=25.0, boundary="wall"),
+        ego=EgoSpec(lane=1, s0=10.0, speed=draw(20.0, 17.0, 22.0), goal_s=370.0),
+        road_users=(cutter,),
+        duration=30.0,
+        expect=ExpectSpec(ego_collision=False),
+    )
+
+
 # --------------------------------------------------------------------------- registry
 
 
@@ -615,6 +650,7 @@ _FAMILIES = (
     dilemma_pedestrian_car,
     child_between_parked,
     debris_on_lane,
+    cut_in_and_brake,
 )
 
 #: Name -> family, in catalog order.

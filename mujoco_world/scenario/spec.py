@@ -69,6 +69,20 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "behaviour.trigger_distance": (0.1, 1000.0, "m"),
     "behaviour.speed_profile": (0.0, 70.0, "m/s"),
     "behaviour.lateral": (-20.0, 20.0, "m"),
+    "when.time": (0.0, 3600.0, "s"),
+    "when.delay": (0.0, 3600.0, "s"),
+    "when.distance_below": (0.1, 1000.0, "m"),
+    "when.distance_above": (0.1, 1000.0, "m"),
+    "when.ttc_below": (0.01, 60.0, "s"),
+    "when.s_above": (0.0, 20000.0, "m"),
+    "when.s_below": (0.0, 20000.0, "m"),
+    "when.speed_above": (0.0, 70.0, "m/s"),
+    "when.speed_below": (0.0, 70.0, "m/s"),
+    "do.speed": (0.0, 70.0, "m/s"),
+    "do.acceleration": (0.1, 15.0, "m/s^2"),
+    "do.speed_profile": (0.0, 70.0, "m/s"),
+    "do.lateral": (-20.0, 20.0, "m"),
+    "do.duration": (0.1, 30.0, "s"),
     "legal.speed_limit": (0.0, 70.0, "m/s"),
     "legal.lateral_half_width": (0.0, 20.0, "m"),
     "road_user.s0": (0.0, 20000.0, "m"),
@@ -383,6 +397,158 @@ class CrossingSpec:
 
 
 @dataclass(frozen=True, slots=True)
+class ConditionSpec:
+    """When a scripted event fires: every condition given must hold (at a behaviour tick).
+
+    Attributes:
+        time: the run's time is at least this [s].
+        delay: at least this long since the previous event of the script fired (or
+            since the road user's activation for the first event) [s].
+        to: whom ``distance_*`` and ``ttc_below`` measure to: ``ego`` or a road user's name.
+        distance_below: centre distance to ``to`` is below this [m].
+        distance_above: centre distance to ``to`` is above this [m].
+        ttc_below: constant-velocity time-to-collision with ``to`` (footprints,
+            ``evaluation.safety.time_to_collision``) is below this [s].
+        of: whose position and speed ``s_*`` and ``speed_*`` read: ``self`` (default),
+            ``ego`` or a road user's name.
+        s_above, s_below: its arc length along its own route is above / below this [m]
+            (the ego: along its route).
+        speed_above, speed_below: its speed is above / below this [m/s].
+    """
+
+    time: float | None = None
+    delay: float | None = None
+    to: str = "ego"
+    distance_below: float | None = None
+    distance_above: float | None = None
+    ttc_below: float | None = None
+    of: str = "self"
+    s_above: float | None = None
+    s_below: float | None = None
+    speed_above: float | None = None
+    speed_below: float | None = None
+
+    def __post_init__(self) -> None:
+        check_finite(
+            "when",
+            **{name: getattr(self, name) for name in _CONDITION_VALUES},
+        )
+        check_plausible("when", self)
+        check(
+            any(getattr(self, name) is not None for name in _CONDITION_VALUES),
+            f"needs at least one condition of {', '.join(_CONDITION_VALUES)}",
+        )
+        for name in ("to", "of"):
+            value = getattr(self, name)
+            check(
+                isinstance(value, str) and value.isidentifier(),
+                f"when.{name} must be 'ego', 'self' or a road user's name, got {value!r}",
+            )
+        check(self.to != "self", "when.to must be 'ego' or another road user's name, not 'self'")
+
+    @property
+    def needs_ego_s(self) -> bool:
+        """True if it reads the ego's arc length along its route."""
+        return self.of == "ego" and (self.s_above is not None or self.s_below is not None)
+
+
+#: Conditions of ``ConditionSpec`` that take a value.
+_CONDITION_VALUES = (
+    "time",
+    "delay",
+    "distance_below",
+    "distance_above",
+    "ttc_below",
+    "s_above",
+    "s_below",
+    "speed_above",
+    "speed_below",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class ActionSpec:
+    """What a scripted event does: at most one longitudinal and one lateral action.
+
+    Times of knot lists count from the moment the event fires.
+
+    Attributes:
+        speed: go to this speed [m/s] at ``acceleration``.
+        acceleration: rate of the speed change of ``speed``, ``stop`` and ``start``
+            [m/s^2] (default 3).
+        stop: brake to a standstill at ``acceleration``.
+        start: go (back) to the behaviour's ``speed`` at ``acceleration``.
+        speed_profile: (time [s], speed [m/s]) knots, linear between, from the speed
+            at the event.
+        lateral: (time [s], offset [m], positive left of travel) knots, smooth
+            between, from the offset at the event.
+        change_lane: move this many lanes (+ left, - right) over ``duration``.
+        duration: time of a lane change [s] (default 3).
+    """
+
+    speed: float | None = None
+    acceleration: float = 3.0
+    stop: bool = False
+    start: bool = False
+    speed_profile: tuple[tuple[float, float], ...] = ()
+    lateral: tuple[tuple[float, float], ...] = ()
+    change_lane: int = 0
+    duration: float = 3.0
+
+    def __post_init__(self) -> None:
+        for name in ("stop", "start"):
+            check(isinstance(getattr(self, name), bool), f"do.{name} must be true or false")
+        check(
+            isinstance(self.change_lane, int) and not isinstance(self.change_lane, bool),
+            f"do.change_lane must be an integer number of lanes, got {self.change_lane!r}",
+        )
+        check(abs(self.change_lane) <= 4, f"do.change_lane must lie in -4..4, got {self.change_lane}")
+        check_finite("do", speed=self.speed, acceleration=self.acceleration, duration=self.duration)
+        profile = knots("do", "speed_profile", self.speed_profile)
+        check(all(v >= 0 for _, v in profile), "do.speed_profile speeds must be >= 0 m/s")
+        object.__setattr__(self, "speed_profile", profile)
+        object.__setattr__(self, "lateral", knots("do", "lateral", self.lateral))
+        check_plausible("do", self)
+        longitudinal = [
+            name
+            for name, given in (
+                ("speed", self.speed is not None),
+                ("stop", self.stop),
+                ("start", self.start),
+                ("speed_profile", bool(self.speed_profile)),
+            )
+            if given
+        ]
+        lateral = [
+            name
+            for name, given in (("lateral", bool(self.lateral)), ("change_lane", self.change_lane != 0))
+            if given
+        ]
+        check(len(longitudinal) <= 1, f"takes one of speed, stop, start, speed_profile; got {longitudinal}")
+        check(len(lateral) <= 1, f"takes one of lateral, change_lane; got {lateral}")
+        check(
+            longitudinal or lateral,
+            "needs an action: speed, stop, start, speed_profile, lateral or change_lane",
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class EventSpec:
+    """One step of a road user's script: when ``when`` holds, do ``do``.
+
+    A road user's events run in order: event k is armed once event k - 1 has fired
+    (the first once the road user is activated); each fires once.
+
+    Attributes:
+        when: the condition.
+        do: the action.
+    """
+
+    when: ConditionSpec
+    do: ActionSpec
+
+
+@dataclass(frozen=True, slots=True)
 class BehaviourSpec:
     """How a road user moves (see ``BehaviourKind``).
 
@@ -401,6 +567,7 @@ class BehaviourSpec:
         idm: car-following parameters (kind idm; defaults if omitted).
         crossing: gap acceptance (kind pedestrian; defaults if omitted).
         trajectory: the recording to follow (kind recorded only, required there).
+        events: a script of triggered actions, run in order (``EventSpec``).
     """
 
     kind: BehaviourKind = BehaviourKind.SCRIPTED
@@ -412,6 +579,7 @@ class BehaviourSpec:
     idm: IdmSpec | None = None
     crossing: CrossingSpec | None = None
     trajectory: RecordedTrajectory | None = None
+    events: tuple[EventSpec, ...] = ()
 
     def __post_init__(self) -> None:
         kind = parse_enum(BehaviourKind, self.kind, "behaviour kind", "behaviour.kind")
@@ -419,6 +587,7 @@ class BehaviourSpec:
             (self.trajectory is not None) == (kind is BehaviourKind.RECORDED),
             "behaviour.trajectory is required with kind 'recorded' and allowed only with it",
         )
+        object.__setattr__(self, "events", tuple(self.events))
         object.__setattr__(self, "kind", kind)
         check_non_negative("behaviour", speed=self.speed, start_time=self.start_time)
         check_positive("behaviour", trigger_distance=self.trigger_distance)
@@ -445,8 +614,8 @@ class BehaviourSpec:
             )
         if kind is BehaviourKind.PARKED:
             check(
-                self.speed == 0 and not self.speed_profile and not self.lateral,
-                "behaviour of kind 'parked' takes no speed, speed_profile or lateral",
+                self.speed == 0 and not self.speed_profile and not self.lateral and not self.events,
+                "behaviour of kind 'parked' takes no speed, speed_profile, lateral or events",
             )
         if kind is BehaviourKind.RECORDED:
             check(
@@ -454,9 +623,10 @@ class BehaviourSpec:
                 and self.start_time == 0
                 and self.trigger_distance is None
                 and not self.speed_profile
-                and not self.lateral,
+                and not self.lateral
+                and not self.events,
                 "behaviour of kind 'recorded' takes its motion from its trajectory only "
-                "(no speed, start_time, trigger_distance, speed_profile or lateral)",
+                "(no speed, start_time, trigger_distance, speed_profile, lateral or events)",
             )
 
 
@@ -1027,6 +1197,21 @@ class Scenario:
                 self.ego.turn is Turn.STRAIGHT,
                 "ego.turn is only allowed on an intersection road",
             )
+        known = {"ego", *names}
+        for i, user in enumerate(self.road_users):
+            for k, event in enumerate(user.behaviour.events):
+                for key in ("to", "of"):
+                    other = getattr(event.when, key)
+                    check(
+                        other in known or (key == "of" and other == "self"),
+                        f"road_users[{i}] ({user.name}).behaviour.events[{k}].when.{key}: unknown road user "
+                        f"{other!r}; allowed: {', '.join(sorted(known))}",
+                    )
+                    check(
+                        key == "of" or other != user.name,
+                        f"road_users[{i}] ({user.name}).behaviour.events[{k}].when.{key}: a road user "
+                        f"measures to others (use of = 'self' for its own state)",
+                    )
         for i, user in enumerate(self.road_users):
             where = f"road_users[{i}] ({user.name})"
             route = user.route
