@@ -713,7 +713,7 @@ class RoadUserSpec:
         try:
             kind = parse_enum(RoadUserType, self.type, "road-user type", "type")
         except ValueError:
-            raise ValueError(f"road_user.type must be one of {allowed}; got {self.type!r}") from None
+            raise ValueError(f"type: unknown road-user type {self.type!r}; allowed: {allowed}") from None
         object.__setattr__(self, "type", kind)
         if self.kind is not None:
             check(
