@@ -125,7 +125,7 @@ def pedestrian_behind_parked(rng: np.random.Generator | None = None) -> Scenario
     ego_speed = draw(13.9, 11.0, 13.9)
     road = RoadSpec(length=200.0, speed_limit=13.9, parking_width=2.5)
     kerb_y = -(road.half_width + road.parking_width + road.shoulder)
-    ped_x = parked_x + draw(3.2, 2.8, 4.0)
+    ped_x = parked_x + draw(3.2, 3.05, 4.0)  # >= 3.0 m: clear of the van (2.75 m) with its 0.25 m radius
     start_y = kerb_y + 1.0  # hidden in the parking strip, in front of the van
     ped = _user(
         "pedestrian",
