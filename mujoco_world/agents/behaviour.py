@@ -26,7 +26,7 @@ from ethical_planner.geometry import rectangle_half_extent
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.registry import Registry
 from ethical_planner.road_users import LegalCorridor, RoadUserType
-from mujoco_world.evaluation.safety import time_to_collision
+from mujoco_world.physics.safety import time_to_collision
 from mujoco_world.scenario.recorded_tracks import RecordedTracks
 from mujoco_world.scenario.spec import ActionSpec, BehaviourKind, ConditionSpec, RoadUserSpec
 

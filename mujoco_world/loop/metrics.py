@@ -24,11 +24,11 @@ import numpy as np
 from ethical_planner.road_users import VULNERABLE_TYPES, RoadUserType
 from mujoco_world.agents.ego_planner import Plan
 from mujoco_world.evaluation.compare import ImpactRecord
-from mujoco_world.evaluation.safety import time_to_collision
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.state import RunState
 from mujoco_world.loop.summary import GROUPS
 from mujoco_world.loop.world import World
+from mujoco_world.physics.safety import time_to_collision
 
 #: Number of highest risk values kept per group (paper Fig. 5 uses 100).
 TOP_RISKS = 100

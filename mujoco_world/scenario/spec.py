@@ -408,7 +408,7 @@ class ConditionSpec:
         distance_below: centre distance to ``to`` is below this [m].
         distance_above: centre distance to ``to`` is above this [m].
         ttc_below: constant-velocity time-to-collision with ``to`` (footprints,
-            ``evaluation.safety.time_to_collision``) is below this [s].
+            ``physics.safety.time_to_collision``) is below this [s].
         of: whose position and speed ``s_*`` and ``speed_*`` read: ``self`` (default),
             ``ego`` or a road user's name.
         s_above, s_below: its arc length along its own route is above / below this [m]

@@ -16,7 +16,7 @@ metrics``):
   ego's first contact: each body keeps its current velocity and heading, footprints
   are oriented rectangles (pedestrians: squares of their diameter), and the TTC is
   the first time in [0, 10 s] at which the ego's rectangle and a road user's overlap
-  (``evaluation.safety.time_to_collision``). No approach within the horizon gives inf
+  (``physics.safety.time_to_collision``). No approach within the horizon gives inf
   (written as the string "inf").
 * ``max_collision_probability``: the highest ``collision_probability`` of any road
   user along the chosen plans (``Decision.road_users``).

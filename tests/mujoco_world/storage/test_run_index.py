@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from harm_calibration.cli.runs import register
-from mujoco_world.evaluation.safety import time_to_collision
 from mujoco_world.loop.summary import RunSummary
+from mujoco_world.physics.safety import time_to_collision
 from mujoco_world.storage.run_folder import store_run
 from mujoco_world.storage.run_index import (
     INDEX_FILE,
