@@ -1181,15 +1181,7 @@ class Scenario:
                     "(its main route is the reference path shifted by route.offset)",
                 )
         object.__setattr__(self, "debris", tuple(self.debris))
-        debris_names = [d.name for d in self.debris]
-        twice = sorted({n for n in debris_names if debris_names.count(n) > 1})
-        check(not twice, f"debris: duplicate names {twice}")
-        for i, piece in enumerate(self.debris):
-            check(
-                piece.s <= length,
-                f"debris[{i}] ({piece.name}).s must lie on the road (<= road.length {length:g} m), "
-                f"got {piece.s}",
-            )
+        self._check_debris()
         lanes = self.road.lanes
         check(self.ego.lane < lanes, f"ego.lane must be < road.lanes ({lanes}), got {self.ego.lane}")
         if self.road.kind is not RoadKind.INTERSECTION:
@@ -1197,21 +1189,7 @@ class Scenario:
                 self.ego.turn is Turn.STRAIGHT,
                 "ego.turn is only allowed on an intersection road",
             )
-        known = {"ego", *names}
-        for i, user in enumerate(self.road_users):
-            for k, event in enumerate(user.behaviour.events):
-                for key in ("to", "of"):
-                    other = getattr(event.when, key)
-                    check(
-                        other in known or (key == "of" and other == "self"),
-                        f"road_users[{i}] ({user.name}).behaviour.events[{k}].when.{key}: unknown road user "
-                        f"{other!r}; allowed: {', '.join(sorted(known))}",
-                    )
-                    check(
-                        key == "of" or other != user.name,
-                        f"road_users[{i}] ({user.name}).behaviour.events[{k}].when.{key}: a road user "
-                        f"measures to others (use of = 'self' for its own state)",
-                    )
+        self._check_events()
         for i, user in enumerate(self.road_users):
             where = f"road_users[{i}] ({user.name})"
             route = user.route
@@ -1234,6 +1212,37 @@ class Scenario:
                     route.turn is Turn.STRAIGHT,
                     f"{where}.route.turn is only allowed on an intersection road",
                 )
+
+    def _check_debris(self) -> None:
+        """Debris names are unique and every piece lies on the road."""
+        length = self.road.length
+        names = [d.name for d in self.debris]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        check(not twice, f"debris: duplicate names {twice}")
+        for i, piece in enumerate(self.debris):
+            check(
+                piece.s <= length,
+                f"debris[{i}] ({piece.name}).s must lie on the road (<= road.length {length:g} m), "
+                f"got {piece.s}",
+            )
+
+    def _check_events(self) -> None:
+        """Every road user a script's condition names exists (``to`` never the road user itself)."""
+        known = {"ego", *(u.name for u in self.road_users)}
+        for i, user in enumerate(self.road_users):
+            for k, event in enumerate(user.behaviour.events):
+                for key in ("to", "of"):
+                    other = getattr(event.when, key)
+                    check(
+                        other in known or (key == "of" and other == "self"),
+                        f"road_users[{i}] ({user.name}).behaviour.events[{k}].when.{key}: unknown road user "
+                        f"{other!r}; allowed: {', '.join(sorted(known))}",
+                    )
+                    check(
+                        key == "of" or other != user.name,
+                        f"road_users[{i}] ({user.name}).behaviour.events[{k}].when.{key}: a road user "
+                        f"measures to others (use of = 'self' for its own state)",
+                    )
 
 
 def scenario_from_dict(data: dict[str, Any]) -> Scenario:

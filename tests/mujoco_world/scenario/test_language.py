@@ -71,6 +71,23 @@ def test_a_road_user_leaves_the_world_once_its_rear_passes_the_roads_end():
     assert world.ego_distances(distmax=50.0)[0] == 50.0
 
 
+def test_a_road_user_leaving_one_fork_of_a_run_stays_in_the_others():
+    """Forks (avoidability branches) share the MuJoCo model; leaving must not reach across."""
+    import copy
+
+    # Soft contact: the only mode in which MuJoCo's own contacts (contype) are on.
+    world = World(_scenario(contact={"mode": "soft"}))
+    while world.time < 1.0:
+        world.step()
+    fork = copy.deepcopy(world)
+    while fork.time < 1.80:
+        fork.step()
+    geom = world.scene.geom_ids[1]
+    assert not fork.present[1] and fork.scene.model.geom_contype[geom] == 0
+    assert world.present[1] and world.scene.model.geom_contype[geom] != 0
+    assert world.scene.model.geom_conaffinity[geom] != 0 and not world.fleet.left[0]
+
+
 def test_a_crashed_road_user_does_not_leave():
     world = World(_scenario())
     world.crashed[1] = True
