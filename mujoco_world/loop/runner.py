@@ -13,7 +13,7 @@ collision. The loop itself is short (``ClosedLoop._step``); around it:
   reason, and what was measured until then is kept; Ctrl-C closes the run as failed
   (observers see ``on_end``) and then raises ``RunInterrupted``;
 * summary building (``summary.build_summary``), with the scenario's ``[expect]``
-  items checked (``evaluation.expectations``).
+  items checked (``loop.expectations``).
 
 Adding a stop rule or a metric is a new object passed to ``run_scenario``; the loop
 does not change.
@@ -40,8 +40,8 @@ from mujoco_world.agents.ego_planner import (
     make_ego_planner,
 )
 from mujoco_world.evaluation.compare import compare_impact
-from mujoco_world.evaluation.expectations import check_expectations
 from mujoco_world.loop.config import RunConfig
+from mujoco_world.loop.expectations import check_expectations
 from mujoco_world.loop.metrics import Metric, default_metrics
 from mujoco_world.loop.observers import ObserverGroup, RunObserver
 from mujoco_world.loop.rules import (

@@ -17,9 +17,8 @@ from ethical_planner.records import to_plain
 from ethical_planner.road_users import RoadUserType, Shape
 from ethical_planner.validation import check, check_positive
 from mujoco_world.evaluation.compare import ImpactRecord
+from mujoco_world.scenario.spec import OUTCOMES as OUTCOMES  # re-exported: the run outcomes
 
-#: Run outcomes.
-OUTCOMES = ("goal", "timeout", "crash", "failed")
 #: Risk groups of the paper's Fig. 5.
 GROUPS = ("ego", "third_party", "vulnerable")
 

@@ -24,6 +24,10 @@ from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, R
 from ethical_planner.validation import check, check_finite, check_non_negative, check_positive, parse_enum
 from mujoco_world.scenario.imported import MapSpec, ObstacleSpec, Points, RecordedTrajectory, points
 
+#: Run outcomes the closed loop gives (``loop.summary``; here so that ``[expect]`` can
+#: name them).
+OUTCOMES = ("goal", "timeout", "crash", "failed")
+
 
 def knots(owner: str, name: str, value: Any) -> tuple[tuple[float, float], ...]:
     """Validate a sequence of (time [s], value) knots with strictly increasing times."""
@@ -1035,7 +1039,7 @@ class ExpectSpec:
     """What a scenario expects of a run: each given item is checked and reported pass/fail.
 
     Items left out (None, or an empty ``outcome``) are not checked. See
-    ``mujoco_world.evaluation.expectations`` for how each is measured.
+    ``mujoco_world.loop.expectations`` for how each is measured.
 
     Attributes:
         outcome: accepted run outcomes (one name or a list).
@@ -1066,8 +1070,6 @@ class ExpectSpec:
 
     def __post_init__(self) -> None:
         outcome = (self.outcome,) if isinstance(self.outcome, str) else tuple(self.outcome)
-        from mujoco_world.loop.summary import OUTCOMES  # the loop's outcome names
-
         bad = [o for o in outcome if o not in OUTCOMES]
         check(not bad, f"expect.outcome must name outcomes among {', '.join(OUTCOMES)}, got {bad}")
         object.__setattr__(self, "outcome", outcome)

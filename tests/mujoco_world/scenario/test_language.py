@@ -10,7 +10,7 @@ import pytest
 from ethical_planner.records import from_mapping, to_plain
 from ethical_planner.risk import outside_drivable_area
 from ethical_planner.road_users import RoadUserType, Shape
-from mujoco_world.evaluation.expectations import EXPECTATIONS, check_expectations
+from mujoco_world.loop.expectations import EXPECTATIONS, check_expectations
 from mujoco_world.loop.runner import run_scenario
 from mujoco_world.loop.summary import RunSummary
 from mujoco_world.loop.world import PARK_ORIGIN_M, World
