@@ -42,13 +42,19 @@ def physically_invalid(candidates: Candidates, vehicle: VehicleConfig) -> dict[s
     The three curvature-based limits are checked where the speed exceeds
     ``vehicle.curvature_check_speed`` (the heading of a standing plan is ill-defined).
     The reference checks speed twice and never acceleration: all are checked here.
+
+    The first sample (t = 0) is the present state, which no candidate can change: it is
+    not checked. A measured acceleration a hair beyond the emergency deceleration (the
+    ego braking at its limit, seen through the physics) would otherwise make every
+    candidate invalid, and the planner would fall back to whatever level 1 offers.
     """
-    v, a, kappa = candidates.v, candidates.a, candidates.kappa
+    v, a, kappa = candidates.v[:, 1:], candidates.a[:, 1:], candidates.kappa[:, 1:]
+    s_dot = candidates.s_dot[:, 1:]
     moving = v > vehicle.curvature_check_speed
     lateral = np.square(v) * np.abs(kappa)
     slack = _ACCELERATION_TOLERANCE
     return {
-        "speed": np.any(v > vehicle.v_max, axis=1) | np.any(candidates.s_dot < -_REVERSE_TOLERANCE, axis=1),
+        "speed": np.any(v > vehicle.v_max, axis=1) | np.any(s_dot < -_REVERSE_TOLERANCE, axis=1),
         "acceleration": np.any(
             (a > vehicle.a_max + slack) | (a < -vehicle.emergency_deceleration - slack), axis=1
         ),

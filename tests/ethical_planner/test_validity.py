@@ -203,3 +203,20 @@ def test_without_the_limit_the_planner_would_break_it(limit):
     trajectory = decision.trajectory
     values = trajectory.v**2 * np.abs(trajectory.kappa) if field == "lateral" else getattr(trajectory, field)
     assert np.abs(values).max() > bound
+
+
+def test_the_present_sample_is_not_judged():
+    """Row 0 breaks every limit only at t = 0 (the present, which no plan can change)."""
+    cands = _candidates([(10.0, 0.0, 0.0, 10.0)])
+    cands.v[0, 0], cands.a[0, 0], cands.kappa[0, 0], cands.s_dot[0, 0] = 31.0, -8.5, 0.3, -0.2
+    reasons = physically_invalid(cands, VEHICLE)
+    assert not any(flags[0] for flags in reasons.values())
+
+
+def test_a_measured_deceleration_beyond_the_limit_leaves_valid_plans():
+    # Regression (curve_truck, 4.5 s): the ego brakes at its limit and the physics
+    # reports -8.06 m/s^2; every candidate starts there, and all 1028 were refused for
+    # acceleration, so the planner fell back to level 1. Braking on at 8 m/s^2 is valid.
+    decision = _plan({"desired_speed": 0.0}, KinematicState(0, 0, 0, 5.0, a=-8.06))
+    assert decision.level == Validity.VALID
+    assert decision.trajectory.a[1:].min() >= -8.0 - 1e-6
