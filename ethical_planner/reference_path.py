@@ -174,7 +174,9 @@ def cartesian_states(
     tangential acceleration (along acc_t + across acc_n) / |v|. Below 1 mm/s a body
     stands: its curvature is 0, its acceleration s'', and it keeps the heading it
     stopped with (atan2 of two rounding residues is no heading); one standing from the
-    start points along the path.
+    start points along the path. A motion rolling backwards (s' < 0, which the validity
+    check tolerates up to a few cm/s) keeps its nose forward: its heading is that of
+    the reversed velocity.
 
     Motions that share their longitudinal part (``lon_row``) share the path's pose,
     evaluated once per distinct longitudinal motion.
@@ -322,7 +324,12 @@ def _cartesian_states(
                 safe = max(speed, 1e-9)
                 out[4, traj, step] = (along * acc_t + across * acc_n) / safe
                 out[5, traj, step] = (along * acc_n - across * acc_t) / math.pow(safe, 3.0)
-                out[2, traj, step] = math.atan2(across, along) + theta_r
+                # Rolling back (within the validity check's reversing tolerance) keeps
+                # the nose forward: a car does not turn round to creep backwards.
+                if along >= 0.0:
+                    out[2, traj, step] = math.atan2(across, along) + theta_r
+                else:
+                    out[2, traj, step] = math.atan2(-across, -along) + theta_r
                 last_moving = step
             else:
                 out[4, traj, step] = s_ddot

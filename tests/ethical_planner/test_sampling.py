@@ -289,3 +289,18 @@ def test_shared_longitudinal_motions_give_the_states_of_the_expanded_ones():
         np.testing.assert_array_equal(getattr(candidates, name), value)
     with pytest.raises(ValueError, match="lon_row"):
         cartesian_states(lon, np.full(lon.shape[1], lon.shape[1]), candidates.lat, path)
+
+
+def test_a_creeping_ego_that_rolls_back_a_little_keeps_its_nose_forward():
+    # Regression (curve_truck, 8.2 s): the ego at 2 cm/s braking at 4.5 m/s^2; every
+    # quartic starts by rolling back a few mm/s (within the validity check's reversing
+    # tolerance), and atan2 of the reversed velocity turned the planned heading by
+    # 180 degrees: the tracking controller then spun the standing car into a wall.
+    path = ReferencePath.from_polyline([[0.0, 0.0], [200.0, 0.0]])
+    start = frenet_state(KinematicState(50.0, -1.0, 0.0, 0.02, a=-4.5), path)
+    candidates = sample_candidates(start, path, SamplingConfig(), VEHICLE)
+    rolls_back = np.any(candidates.s_dot < 0.0, axis=1)
+    assert rolls_back.any()  # the situation of the regression
+    lateral_move = np.abs(candidates.d - candidates.d[:, :1]).max(axis=1) < 0.01
+    # A motion that stays in its lane keeps the path's heading, forwards or backwards.
+    assert np.abs(candidates.yaw[rolls_back & lateral_move]).max() < 0.05
