@@ -47,8 +47,9 @@ Entities (all in the world frame, z up, road plane z = 0):
   state [s]; nan if none within ``RecorderConfig.ttc_horizon``),
   ``series/distance/user_<id>`` (geom distance to the ego [m]; nan beyond 50 m)
   and ``series/visible/user_<id>`` (1 if the ego perceives it, 0 if it is out of
-  sensor range or occluded; nan while it is not in the world). A road user with
-  no value in a flush interval is not written for that interval.
+  sensor range or occluded; nan while it is not in the world), and in the scene
+  ``world/hidden``: a white ring around every road user the ego does not perceive. A
+  road user with no value in a flush interval is not written for that interval.
 * ``world/impacts/<n>/{point,force}`` and ``impacts/<n>/<body>/{dv_measured,
   dv_predicted,harm_measured,harm_predicted}``, plus an ``impacts`` TextLog.
 
@@ -321,6 +322,7 @@ class RerunRecorder(RunObserver):
         self._next_flush = 0.0
         self._impacts = 0
         self._decisions = 0
+        self._hidden_shown = False
         self._rng = np.random.default_rng(0)  # candidate subsampling only, fixed for reproducibility
         self._closed = False
 
@@ -694,7 +696,25 @@ class RerunRecorder(RunObserver):
         s.add_row("series/ttc", time, np.where(present & np.isfinite(ttc), ttc, math.nan))
         distance = world.ego_distances(DISTANCE_CAP)
         s.add_row("series/distance", time, np.where(present & (distance < DISTANCE_CAP), distance, math.nan))
-        s.add_row("series/visible", time, np.where(present, world.visible()[1:], math.nan))
+        visible = world.visible()[1:]
+        s.add_row("series/visible", time, np.where(present, visible, math.nan))
+        # In the scene: a white ring around every road user the ego does not perceive now,
+        # above the tallest body so that the vehicle hiding it does not hide the ring too.
+        hidden = np.flatnonzero(present & ~visible) + 1
+        if hidden.size or self._hidden_shown:
+            centres = np.asarray(world.positions[hidden], dtype=float)
+            radius = 0.5 * np.hypot(world.lengths[hidden], world.widths[hidden]) + 0.5
+            circles = radius[:, None, None] ** 2 * np.eye(2)
+            self._stream().log(
+                "world/hidden",
+                rr.LineStrips3D(
+                    _to3(ellipse_strips(centres, circles, 1.0), self._bodies.z.max() * 2.0 + 0.2),
+                    colors=[(255, 255, 255)],
+                    radii=0.08,
+                    labels=["not perceived"] * hidden.size,
+                ),
+            )
+            self._hidden_shown = bool(hidden.size)
 
     def _log_candidates(self, decision: Decision) -> None:
         rec = self._stream()

@@ -421,6 +421,19 @@ def test_visibility_per_road_user_matches_what_the_planner_saw(hidden_pedestrian
     times, visible = column(chunks[f"/series/visible/user_{pedestrian}"], "Scalars:scalars")
     visible = np.array([v[0] if v else np.nan for v in visible])
     assert visible[times < 3.0].max() == 0.0 and visible[times > 4.5].min() == 1.0
+    # In the scene, a ring surrounds the pedestrian while it is hidden, and nobody after.
+    ring_times, rings = column(chunks["/world/hidden"], "LineStrips3D:strips")
+    hidden_then = [r for t, r in zip(ring_times, rings, strict=True) if 1.0 < t < 3.0]
+    assert hidden_then and all(len(r) == 1 for r in hidden_then)
+    assert rings[-1] == [] and ring_times[-1] < 4.5
+    round_times, round_centers = column(chunks["/world/road_users/round"], "Cylinders3D:centers")
+    pedestrian_at = {
+        round(float(t), 6): c[0][:2] for t, c in zip(round_times, round_centers, strict=True) if c
+    }
+    for t, r in zip(ring_times, rings, strict=True):
+        if r:
+            centre = np.asarray(r[0])[:-1, :2].mean(axis=0)  # the closing point repeats the first
+            assert centre == pytest.approx(pedestrian_at[round(float(t), 6)], abs=1e-5)
     # At every planning cycle, a road user is logged visible iff the planner was given it.
     logged = {}
     for i in range(1, probe.world.n):
