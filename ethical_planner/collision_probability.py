@@ -49,7 +49,17 @@ from ethical_planner.jit import kernel
 from ethical_planner.validation import check_shape, shaped_array
 from ethical_planner.workers import Workers
 
-__all__ = ["CollisionProbability", "collision_probability", "polygon_gaussian_mass"]
+__all__ = [
+    "CollisionProbability",
+    "OctagonTables",
+    "RiskMaximum",
+    "collides",
+    "collision_probability",
+    "gate",
+    "octagon_tables",
+    "polygon_gaussian_mass",
+    "risk_maximum",
+]
 
 #: An origin closer than this (whitened units) to an edge's line is "on" that line:
 #: the edge's triangle (origin, a, b) then has mass below 0.4 * 1e-12 and counts 0.
@@ -99,6 +109,8 @@ _Q_SLOPE = np.append(np.diff(_Q_TABLE), 0.0)
 #: From this many triples, ``collision_probability`` splits its work over the threads of
 #: its ``Workers``.
 _PARALLEL_MIN = 200_000
+#: From this many gated triples, ``risk_maximum`` uses two threads.
+_RISK_PARALLEL_MIN = 20_000
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,7 +128,36 @@ class CollisionProbability:
     mean_overlap: np.ndarray
 
 
-def collision_probability(
+@dataclass(frozen=True, slots=True, eq=False)
+class OctagonTables:
+    """Per-step inputs of the octagon kernels, validated and flattened once per cycle.
+
+    Attributes:
+        obs_rows: per (road user, step), shape (_O_ROWS, n_obs * n_t): mean, whitening,
+            the whitened road-user segments and their products, the covariance, the
+            squared gate radius and the radius of the two footprints' discs.
+            With K Gaussian components per road user (a mixture with a shared mean),
+            column (obs * K + c) * n_t + step holds component c of road user obs.
+        ego_rows: per (candidate, step), shape (_E_ROWS, n_traj * n_t): centre and the
+            raw ego segments (L cos, -W sin) as x and (L sin, W cos) as y.
+        weights: component weights per (road user, step), shape (n_obs * n_t, K) (ones
+            for a single Gaussian); p of a triple is sum_c w_c p_c.
+        n_traj, n_obs, n_t: sizes (n_obs road users, not components).
+        degenerate: a footprint has a zero length or width (zero-length edges).
+        far: edges farther than this from the mean are dropped [whitened units].
+    """
+
+    obs_rows: np.ndarray
+    ego_rows: np.ndarray
+    weights: np.ndarray
+    n_traj: int
+    n_obs: int
+    n_t: int
+    degenerate: bool
+    far: float
+
+
+def octagon_tables(
     ego_x: ArrayLike,
     ego_y: ArrayLike,
     ego_yaw: ArrayLike,
@@ -128,40 +169,17 @@ def collision_probability(
     obs_length: ArrayLike,
     obs_width: ArrayLike,
     gate_sigmas: float = 6.0,
-    workers: Workers | None = None,
-) -> CollisionProbability:
-    """Probability that the ego footprint overlaps each road user's footprint.
+    component_weight: ArrayLike | None = None,
+) -> OctagonTables:
+    """Validate and flatten the inputs of the octagon kernels (see ``collision_probability``).
 
-    p is within 1e-6 of the closed-form Gaussian mass of the octagon (see the module
-    docstring); triples cut by the gate are exactly 0.
-
-    Args:
-        ego_x: Ego centre x on each candidate [m], shape (n_traj, n_t).
-        ego_y: Ego centre y [m], shape (n_traj, n_t).
-        ego_yaw: Ego heading [rad], shape (n_traj, n_t).
-        ego_length: Ego length [m], >= 0.
-        ego_width: Ego width [m], >= 0.
-        obs_mean: Predicted mean of each road user's centre [m], shape (n_obs, n_t, 2).
-        obs_cov: Covariance of that centre [m^2], shape (n_obs, n_t, 2, 2), symmetric
-            positive definite (the caller floors it, SPEC section 3).
-        obs_heading: Road-user heading [rad], held at its mean, shape (n_obs, n_t).
-        obs_length: Road-user lengths [m], shape (n_obs,), >= 0.
-        obs_width: Road-user widths [m], shape (n_obs,), >= 0.
-        gate_sigmas: Triples whose circumscribed discs are more than this many standard
-            deviations (along the covariance's major axis) apart get p = 0 without an
-            integral; the mass cut off is below Phi(-gate_sigmas) (1e-9 at 6).
-            ``math.inf`` disables the gate.
-        workers: helper threads; large inputs (from
-            ``_PARALLEL_MIN`` triples) use its threads. None makes a fresh one for this
-            call (threads from ``ETHICAL_PLANNER_THREADS``); pass one to reuse buffers.
-
-    Returns:
-        Probabilities and mean-position overlaps, both of shape (n_traj, n_obs, n_t).
+    Without ``component_weight`` each of the n_obs Gaussians is a road user. With it,
+    shape (n_road_users, n_t, K), the n_obs = n_road_users * K Gaussians are the
+    components of a mixture per road user, road user o's component c at o * K + c.
 
     Raises:
         ValueError: If an argument has the wrong shape, is not finite, a size is negative,
             or a covariance is not symmetric positive definite.
-
     """
     ex = shaped_array("ego_x", ego_x, "(n_traj, n_t)", 2)
     n_traj, n_t = ex.shape
@@ -182,11 +200,6 @@ def collision_probability(
             raise ValueError(f"{name} must be >= 0 [m], got {sizes}")
     if math.isnan(gate_sigmas) or gate_sigmas < 0.0:
         raise ValueError(f"gate_sigmas must be >= 0 (inf disables the gate), got {gate_sigmas!r}")
-
-    probability = np.zeros((n_traj, n_obs, n_t))
-    mean_overlap = np.zeros((n_traj, n_obs, n_t), dtype=bool)
-    if probability.size == 0:
-        return CollisionProbability(probability, mean_overlap)
 
     # Per (obs, t), computed once and gathered for the survivors: whitening matrix
     # W = L^-1 = [[w11, 0], [w21, w22]] of the Cholesky factor L, closed form for 2x2.
@@ -209,7 +222,8 @@ def collision_probability(
     # around the ego centre, so outside the gate its mass is below Phi(-gate_sigmas).
     sigma_max = np.sqrt(0.5 * (c11 + c22) + np.sqrt(0.25 * (c11 - c22) ** 2 + c12 * c12))
     r_obs = 0.5 * np.hypot(olen, owid)
-    reach = 0.5 * math.hypot(ego_length, ego_width) + r_obs[:, None] + gate_sigmas * sigma_max
+    discs = 0.5 * math.hypot(ego_length, ego_width) + r_obs[:, None]
+    reach = discs + gate_sigmas * sigma_max
 
     # Road-user rows, (_O_ROWS, n_obs * n_t): mean, whitening, its two whitened edge
     # segments (along and across the heading), their lengths, cross and dot product,
@@ -234,6 +248,10 @@ def collision_probability(
             (seg_x[0] * seg_x[1] + seg_y[0] * seg_y[1])[None],
             (det_w * (ego_length * ego_width))[None],
             (reach * reach)[None],
+            c11[None],
+            c12[None],
+            c22[None],
+            np.broadcast_to(discs, (n_obs, n_t))[None],
         ]
     ).reshape(_O_ROWS, n_obs * n_t)
     # Ego rows, (_E_ROWS, n_traj * n_t): centre and the raw ego segments, ordered so
@@ -242,10 +260,77 @@ def collision_probability(
     ego_rows = np.stack([ex, ey, ego_length * ce, -ego_width * se, ego_length * se, ego_width * ce]).reshape(
         _E_ROWS, n_traj * n_t
     )
-    degenerate = min(ego_length, ego_width, float(olen.min()), float(owid.min())) <= 0.0
-
+    degenerate = bool(n_obs) and min(ego_length, ego_width, float(olen.min()), float(owid.min())) <= 0.0
     # Edges dropped beyond gate_sigmas whitened units, the gate's own scale (_FAR_MIN).
     far = min(max(gate_sigmas, _FAR_MIN), _FAR_MAX)
+    if component_weight is None:
+        weights = np.ones((n_obs * n_t, 1))
+    else:
+        weights = shaped_array("component_weight", component_weight, "(n_road_users, n_t, K)", 3)
+        users, k = weights.shape[0], weights.shape[2]
+        check_shape("component_weight", weights, "(n_road_users, n_t, K)", (users, n_t, k))
+        if k == 0 or users * k != n_obs:
+            raise ValueError(
+                f"component_weight: {users} road users x {k} components must make the {n_obs} Gaussians"
+            )
+        n_obs = users
+        weights = np.ascontiguousarray(weights.reshape(users * n_t, k))
+    return OctagonTables(obs_rows, ego_rows, weights, n_traj, n_obs, n_t, degenerate, far)
+
+
+def collision_probability(
+    ego_x: ArrayLike,
+    ego_y: ArrayLike,
+    ego_yaw: ArrayLike,
+    ego_length: float,
+    ego_width: float,
+    obs_mean: ArrayLike,
+    obs_cov: ArrayLike,
+    obs_heading: ArrayLike,
+    obs_length: ArrayLike,
+    obs_width: ArrayLike,
+    gate_sigmas: float = 6.0,
+    workers: Workers | None = None,
+) -> CollisionProbability:
+    """Probability that the ego footprint overlaps each road user's footprint, every triple.
+
+    p is within 1e-6 of the closed-form Gaussian mass of the octagon (see the module
+    docstring); triples cut by the gate are exactly 0.
+
+    Args:
+        ego_x: Ego centre x on each candidate [m], shape (n_traj, n_t).
+        ego_y: Ego centre y [m], shape (n_traj, n_t).
+        ego_yaw: Ego heading [rad], shape (n_traj, n_t).
+        ego_length: Ego length [m], >= 0.
+        ego_width: Ego width [m], >= 0.
+        obs_mean: Predicted mean of each road user's centre [m], shape (n_obs, n_t, 2).
+        obs_cov: Covariance of that centre [m^2], shape (n_obs, n_t, 2, 2), symmetric
+            positive definite (the caller floors it, SPEC section 3).
+        obs_heading: Road-user heading [rad], held at its mean, shape (n_obs, n_t).
+        obs_length: Road-user lengths [m], shape (n_obs,), >= 0.
+        obs_width: Road-user widths [m], shape (n_obs,), >= 0.
+        gate_sigmas: Triples whose circumscribed discs are more than this many standard
+            deviations (along the covariance's major axis) apart get p = 0 without an
+            integral; the mass cut off is below Phi(-gate_sigmas) (1e-9 at 6).
+            ``math.inf`` disables the gate.
+        workers: helper threads; large inputs (from ``_PARALLEL_MIN`` triples) use them.
+            None makes a fresh one for this call (threads from ``ETHICAL_PLANNER_THREADS``).
+
+    Returns:
+        Probabilities and mean-position overlaps, both of shape (n_traj, n_obs, n_t).
+
+    Raises:
+        ValueError: If an argument has the wrong shape, is not finite, a size is negative,
+            or a covariance is not symmetric positive definite.
+
+    """
+    ego = (ego_x, ego_y, ego_yaw, ego_length, ego_width)
+    tables = octagon_tables(*ego, obs_mean, obs_cov, obs_heading, obs_length, obs_width, gate_sigmas)
+    n_traj, n_obs, n_t = tables.n_traj, tables.n_obs, tables.n_t
+    probability = np.zeros((n_traj, n_obs, n_t))
+    mean_overlap = np.zeros((n_traj, n_obs, n_t), dtype=bool)
+    if probability.size == 0:
+        return CollisionProbability(probability, mean_overlap)
     # Blocks of trajectories, at least two per thread so that the threads finish together;
     # each block writes its own rows of the outputs, so the result does not depend on
     # which thread runs which block.
@@ -255,12 +340,141 @@ def collision_probability(
     jobs = [(start, min(start + block, n_traj)) for start in range(0, n_traj, block)]
 
     def run(job: tuple[int, int]) -> None:
-        _gate_and_integrate(
-            obs_rows, ego_rows, n_obs, n_t, job[0], job[1], degenerate, far, probability, mean_overlap
-        )
+        rows = (tables.obs_rows, tables.ego_rows, n_obs, n_t, job[0], job[1])
+        _gate_and_integrate(*rows, tables.degenerate, tables.far, probability, mean_overlap)
 
     workers.parallel_for(jobs, run)
     return CollisionProbability(probability, mean_overlap)
+
+
+def collides(tables: OctagonTables, rows: np.ndarray) -> np.ndarray:
+    """Whether each candidate of ``rows`` meets a predicted mean occupancy at some step.
+
+    The footprints overlap, touching counts, with a road user at its predicted mean
+    (the ``mean_overlap`` of ``collision_probability``, any road user, any step).
+
+    Args:
+        tables: the cycle's tables.
+        rows: candidate indices, shape (m,).
+
+    Returns:
+        Shape (m,), bool.
+    """
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    out = np.zeros(rows.size, dtype=bool)
+    if rows.size and tables.n_obs:
+        k = tables.weights.shape[1]
+        _collides(
+            tables.obs_rows, tables.ego_rows, tables.n_obs * k, k, tables.n_t, rows, tables.degenerate, out
+        )
+    return out
+
+
+def gate(tables: OctagonTables, rows: np.ndarray) -> np.ndarray:
+    """The triples of candidates ``rows`` that pass the distance gate (see ``collision_probability``).
+
+    Args:
+        tables: the cycle's tables.
+        rows: candidate indices, shape (m,).
+
+    Returns:
+        Flat indices (i * n_obs + obs) * n_t + step of the triples, i indexing ``rows``,
+        ascending.
+    """
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    flat = np.empty(rows.size * tables.n_obs * tables.n_t, dtype=np.int64)
+    if not flat.size:
+        return flat
+    k = tables.weights.shape[1]
+    return flat[: _gate_triples(tables.obs_rows, tables.ego_rows, tables.n_obs, k, tables.n_t, rows, flat)]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RiskMaximum:
+    """Eq. 3 of (candidate, road user) pairs from their gated triples, shape (m, n_obs) each.
+
+    Attributes:
+        risk_obs: R_k = max_t p H_obs.
+        risk_ego: R_ego,k = max_t p H_ego.
+        maximin_harm_obs: highest harm of the road user at a step with p > epsilon (0 if none).
+        maximin_harm_ego: the ego's harm, likewise.
+        peak_probability: highest p (exact if ``onset`` was asked for; otherwise the
+            highest of the integrals evaluated, a lower bound).
+        onset_step: first step at which p reaches half its peak (0 without any p > 0);
+            only if ``onset`` was asked for, else 0.
+        triples: triples that passed the gate.
+        integrals: octagon integrals evaluated (the rest were shown not to matter).
+    """
+
+    risk_obs: np.ndarray
+    risk_ego: np.ndarray
+    maximin_harm_obs: np.ndarray
+    maximin_harm_ego: np.ndarray
+    peak_probability: np.ndarray
+    onset_step: np.ndarray
+    triples: int
+    integrals: int
+
+
+def risk_maximum(
+    tables: OctagonTables,
+    rows: np.ndarray,
+    flat: np.ndarray,
+    harm_obs: np.ndarray,
+    harm_ego: np.ndarray,
+    epsilon: float,
+    onset: bool = False,
+    workers: Workers | None = None,
+) -> RiskMaximum:
+    """Eq. 3 and maximin's harms of every (candidate, road user) pair, integrals only where they matter.
+
+    The results are those of evaluating p at every gated triple. Eq. 3 takes a maximum
+    over time: a triple whose upper bound of p, times its harm, lies below the maximum
+    found so far, below epsilon (or with harms below those already
+    counted for maximin), and, with ``onset``, below half the highest p found so far,
+    changes none of the results; its integral is skipped. The bounds (the footprints'
+    discs, then the octagon's bounding rectangles, plus the 1e-6 accuracy of p) bound
+    the computed p, so the results are those of the full evaluation to the bit. A
+    mixture's bound is the weighted sum of its components' bounds (0 for a component
+    the gate cuts: its p is 0), which bounds its p = sum_c w_c p_c.
+
+    Args:
+        tables: the cycle's tables.
+        rows: candidate indices, shape (m,).
+        flat: their gated triples (``gate``).
+        harm_obs: the road user's harm of each triple's collision, shape like ``flat``.
+        harm_ego: the ego's harm, likewise.
+        epsilon: maximin's collision-probability threshold.
+        onset: also find each pair's highest p and the step where p first reaches half
+            of it (the responsibility's collision geometry), exactly.
+        workers: threads for large inputs.
+
+    Returns:
+        The results per pair; pairs without gated triples have 0 everywhere.
+    """
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    m, n_obs, n_t = rows.size, tables.n_obs, tables.n_t
+    out = np.zeros((5, m, n_obs))
+    onset_step = np.zeros((m, n_obs), dtype=np.int64)
+    counts = np.zeros((2, 2), dtype=np.int64)
+    # Two halves split at a pair boundary for two threads: each writes its own pairs.
+    cuts = [0, flat.size]
+    workers = Workers() if workers is None else workers
+    if workers.threads > 1 and flat.size >= _RISK_PARALLEL_MIN:
+        middle = int(np.searchsorted(flat, (flat[flat.size // 2] // n_t) * n_t))
+        cuts = [0, middle, flat.size] if 0 < middle < flat.size else cuts
+    harm_obs = np.ascontiguousarray(harm_obs, dtype=float)
+    harm_ego = np.ascontiguousarray(harm_ego, dtype=float)
+
+    inputs = (tables.obs_rows, tables.ego_rows, tables.weights, n_obs, n_t, rows, flat, harm_obs, harm_ego)
+
+    def run(job: int) -> None:
+        settings = (epsilon, onset, tables.degenerate, tables.far)
+        _risk_maximum(*inputs, cuts[job], cuts[job + 1], *settings, out, onset_step, counts[job])
+
+    workers.parallel_for(list(range(len(cuts) - 1)), run)
+    total = counts.sum(axis=0)
+    return RiskMaximum(*out, onset_step, int(total[0]), int(total[1]))
 
 
 def polygon_gaussian_mass(vertices: ArrayLike, mean: ArrayLike, cov: ArrayLike) -> np.ndarray:
@@ -405,14 +619,16 @@ def _winding(h: np.ndarray, t1: np.ndarray, t2: np.ndarray, on_line: np.ndarray)
 
 # --- fast path: compiled kernels (gate, octagon edges, Owen's T) ----------------------------
 
-# Rows of the per-(obs, t) table built in collision_probability: mean x, y; whitening
+# Rows of the per-(obs, t) table built by octagon_tables: mean x, y; whitening
 # w11, w21, w22; the whitened road-user segments (x of both, y of both, lengths of both);
 # det W * length * width of the road user; the dot product of its two segments;
-# det W * length * width of the ego; the squared gate radius.
+# det W * length * width of the ego; the squared gate radius; the covariance c11, c12,
+# c22; the sum of the radii of the two footprints' circumscribed discs.
 _O_MX, _O_MY, _O_W11, _O_W21, _O_W22 = 0, 1, 2, 3, 4
 _O_SX, _O_SY, _O_LEN = 5, 7, 9
 _O_C, _O_D, _O_CEGO, _O_REACH2 = 11, 12, 13, 14
-_O_ROWS = 15
+_O_C11, _O_C12, _O_C22, _O_DISCS = 15, 16, 17, 18
+_O_ROWS = 19
 # Rows of the per-(traj, t) table: centre x, y and the raw ego segments
 # (L cos, -W sin) as x and (L sin, W cos) as y.
 _E_ROWS = 6
@@ -487,8 +703,10 @@ def _octagon_edges(
         ego_rows: the per-(traj, t) table, shape (_E_ROWS, n_traj * n_t).
         e: column of the (traj, t) pair.
         degenerate: a footprint has a zero length or width (zero-length edges).
-        edges: shape (4, 8), written: h, t1, t2 and |g| of the eight edges (whitened
-            units; degenerate edges have h = t1 = t2 = 0).
+        edges: shape (6, 8), written: h, t1, t2 and |g| of the eight edges (whitened
+            units; degenerate edges have h = t1 = t2 = 0), and in rows 4 and 5 the
+            octagon's extent along u_k, k = 0..3, [z . u_k - s_k, z . u_k + s_k] with the
+            zonotope's support s_k = sum_i |g_i . u_k| / 2.
     """
     w11 = obs_rows[_O_W11, o]
     w21 = obs_rows[_O_W21, o]
@@ -546,12 +764,16 @@ def _octagon_edges(
     for k in range(4):
         if k == 0:
             gx, gy, rho, tau = sx0, sy0, rho0, tau0
+            dots = abs(obs_dot) + abs(d02) + abs(d03)
         elif k == 1:
             gx, gy, rho, tau = sx1, sy1, rho1, tau1
+            dots = abs(obs_dot) + abs(d12) + abs(d13)
         elif k == 2:
             gx, gy, rho, tau = sx2, sy2, rho2, tau2
+            dots = abs(d02) + abs(d12) + abs(ego_dot)
         else:
             gx, gy, rho, tau = sx3, sy3, rho3, tau3
+            dots = abs(d03) + abs(d13) + abs(ego_dot)
         across = gy * z0 - gx * z1
         along = gx * z0 + gy * z1
         size = length[k]
@@ -563,6 +785,11 @@ def _octagon_edges(
         t1[k + 4] = (tau - along) * half_inv - half
         t2[k] = t1[k] + size
         t2[k + 4] = t1[k + 4] + size
+        # 2 |g_k| (z . u_k) = along and 2 |g_k| s_k = |g_k|^2 + sum_{i != k} |g_k . g_i|.
+        centre = along * half_inv
+        support = (size * size + dots) * half_inv
+        edges[4, k] = centre - support
+        edges[5, k] = centre + support
 
 
 @kernel
@@ -633,7 +860,7 @@ def _gate_and_integrate(
             where the gate lets a triple through (the rest stays 0).
         mean_overlap: output, same shape: the mean lies in the closed octagon.
     """
-    edges = np.empty((4, 8))
+    edges = np.empty((6, 8))
     for traj in range(start, stop):
         for obs in range(n_obs):
             for step in range(n_t):
@@ -650,3 +877,393 @@ def _gate_and_integrate(
                     # Touching counts: on the inner side of every edge line, within _H_TOL.
                     mean_overlap[traj, obs, step] = lowest > -_H_TOL
                     probability[traj, obs, step] = _octagon_mass(edges, far)
+
+
+# --- bounds and the risk maximum (paper Eq. 3) without integrals that cannot matter ----------
+
+#: Slack [1] added to every upper bound of p before it is compared: the computed p is
+#: within 1e-6 of the true mass (module docstring), the bounds bound the true mass.
+_BOUND_SLACK = 1e-6
+#: Largest error of the tabulated tail (see _Q_STEP).
+_Q_ERROR = 2e-9
+#: The largest tail the table holds, an upper bound of Q beyond it.
+_Q_FLOOR = float(_Q_TABLE[int(_FAR_MAX / _Q_STEP)])
+
+
+@kernel
+def _tail_bounds(x: float) -> tuple[float, float]:
+    """Lower and upper bound of Q(x) = P(Z > x) for x >= 0.
+
+    Linear interpolation of the convex Q overestimates it by at most _Q_ERROR.
+    """
+    if x >= _FAR_MAX:
+        return 0.0, _Q_FLOOR
+    upper = _upper_tail(x)
+    return max(upper - _Q_ERROR, 0.0), upper
+
+
+@kernel
+def _slab_upper(low: float, high: float) -> float:
+    """Upper bound of the standard normal mass of [low, high]."""
+    if low >= 0.0:
+        return _tail_bounds(low)[1] - _tail_bounds(high)[0]
+    if high <= 0.0:
+        return _tail_bounds(-high)[1] - _tail_bounds(-low)[0]
+    return min(1.0 - _tail_bounds(-low)[0] - _tail_bounds(high)[0], 1.0)
+
+
+@kernel
+def _disc_bound(obs_rows: np.ndarray, o: int, ego_rows: np.ndarray, e: int) -> float:
+    """Upper bound of the true p from the footprints' circumscribed discs.
+
+    The octagon lies in the disc of radius r (both discs' radii) around the ego centre,
+    at distance d from the mean; beyond d - r along that direction u lies a half-plane
+    holding the disc, of mass Q((d - r) / sigma_u), sigma_u^2 = u^T Sigma u.
+    """
+    dx = ego_rows[0, e] - obs_rows[_O_MX, o]
+    dy = ego_rows[1, e] - obs_rows[_O_MY, o]
+    d2 = dx * dx + dy * dy
+    radius = obs_rows[_O_DISCS, o]
+    if d2 <= radius * radius:
+        return 1.0
+    c11, c12, c22 = obs_rows[_O_C11, o], obs_rows[_O_C12, o], obs_rows[_O_C22, o]
+    variance = dx * dx * c11 + 2.0 * dx * dy * c12 + dy * dy * c22  # d^2 u^T Sigma u
+    gap = math.sqrt(d2) - radius
+    return _tail_bounds(gap * math.sqrt(d2 / variance))[1]
+
+
+@kernel
+def _rectangle_bound(edges: np.ndarray) -> float:
+    """Upper bound of the true p from the octagon's bounding rectangles (``_octagon_edges``).
+
+    In the frame (n_k, u_k) of each edge direction the octagon lies in the rectangle
+    [-h_{k+4}, h_k] x [u extent]; the standard normal's coordinates along orthonormal
+    directions are independent, so its mass is the product of two interval masses.
+    The best of the four frames is returned.
+    """
+    best = 1.0
+    for k in range(4):
+        if edges[3, k] > _MIN_EDGE:
+            across = _slab_upper(-edges[0, k + 4], edges[0, k])
+            best = min(best, across * _slab_upper(edges[4, k], edges[5, k]))
+    return best
+
+
+@kernel
+def _collides(
+    obs_rows: np.ndarray,
+    ego_rows: np.ndarray,
+    n_gauss: int,
+    n_components: int,
+    n_t: int,
+    rows: np.ndarray,
+    degenerate: bool,
+    out: np.ndarray,
+) -> None:
+    """Whether candidate ``rows[i]`` meets a predicted mean occupancy at some step, out[i].
+
+    The footprints overlap (touching counts) when the mean lies in the closed octagon,
+    which needs the discs to overlap first. A mixture's components share the mean:
+    component 0 of each road user (every ``n_components``-th of the n_gauss) decides.
+    """
+    edges = np.empty((6, 8))
+    for i in range(rows.size):
+        traj = rows[i]
+        found = False
+        for obs in range(0, n_gauss, n_components):
+            for step in range(n_t):
+                o = obs * n_t + step
+                e = traj * n_t + step
+                dx = ego_rows[0, e] - obs_rows[_O_MX, o]
+                dy = ego_rows[1, e] - obs_rows[_O_MY, o]
+                radius = obs_rows[_O_DISCS, o]
+                if dx * dx + dy * dy <= radius * radius:
+                    _octagon_edges(obs_rows, o, ego_rows, e, degenerate, edges)
+                    lowest = np.inf
+                    for k in range(8):
+                        lowest = min(lowest, edges[0, k])
+                    if lowest > -_H_TOL:
+                        found = True
+                        break
+            if found:
+                break
+        out[i] = found
+
+
+@kernel
+def _gate_triples(
+    obs_rows: np.ndarray,
+    ego_rows: np.ndarray,
+    n_obs: int,
+    n_components: int,
+    n_t: int,
+    rows: np.ndarray,
+    flat: np.ndarray,
+) -> int:
+    """Triples (i, obs, step) of candidates ``rows[i]`` that pass the gate of some component.
+
+    Writes their flat indices (i * n_obs + obs) * n_t + step, ascending, to ``flat``
+    (capacity rows.size * n_obs * n_t) and returns how many.
+    """
+    count = 0
+    for i in range(rows.size):
+        traj = rows[i]
+        for obs in range(n_obs):
+            for step in range(n_t):
+                e = traj * n_t + step
+                for c in range(n_components):
+                    o = (obs * n_components + c) * n_t + step
+                    dx = ego_rows[0, e] - obs_rows[_O_MX, o]
+                    dy = ego_rows[1, e] - obs_rows[_O_MY, o]
+                    if dx * dx + dy * dy <= obs_rows[_O_REACH2, o]:
+                        flat[count] = (i * n_obs + obs) * n_t + step
+                        count += 1
+                        break
+    return count
+
+
+@kernel
+def _in_gate(obs_rows: np.ndarray, o: int, ego_rows: np.ndarray, e: int) -> bool:
+    """Whether the (Gaussian, step) column o and the (candidate, step) column e pass the gate."""
+    dx = ego_rows[0, e] - obs_rows[_O_MX, o]
+    dy = ego_rows[1, e] - obs_rows[_O_MY, o]
+    return dx * dx + dy * dy <= obs_rows[_O_REACH2, o]
+
+
+@kernel
+def _risk_maximum(
+    obs_rows: np.ndarray,
+    ego_rows: np.ndarray,
+    weights: np.ndarray,
+    n_obs: int,
+    n_t: int,
+    rows: np.ndarray,
+    flat: np.ndarray,
+    harm_obs: np.ndarray,
+    harm_ego: np.ndarray,
+    first: int,
+    last: int,
+    epsilon: float,
+    onset: bool,
+    degenerate: bool,
+    far: float,
+    out: np.ndarray,
+    onset_step: np.ndarray,
+    counts: np.ndarray,
+) -> None:
+    """Eq. 3 and the maximin harms of the (candidate, road user) pairs of triples first:last.
+
+    Per pair, over its triples that pass the gate (``_gate_triples``), the outputs equal
+    those of evaluating p at every triple: R = max_t p H (road user and ego), the highest
+    harms at steps with p > epsilon, and with ``onset`` the highest p and the first step
+    where p reaches half of it. Triples are visited in decreasing order of an upper bound
+    of p H; a triple whose upper bound of p (``_disc_bound``, then ``_rectangle_bound``,
+    plus _BOUND_SLACK) shows it can change none of the outputs known so far keeps its
+    integral unevaluated.
+
+    Args:
+        obs_rows, ego_rows, weights, n_obs, n_t: the tables (``OctagonTables``).
+        rows: the candidates' rows in the tables, shape (m,).
+        flat: the triples' flat indices (i * n_obs + obs) * n_t + step, ascending.
+        harm_obs, harm_ego: harm of each triple's collision, same length as ``flat``.
+        first: first triple to process; must start a pair.
+        last: one past the last; must end a pair.
+        epsilon: maximin's collision-probability threshold.
+        onset: also find the highest p and its onset step exactly.
+        degenerate, far: see ``OctagonTables``.
+        out: shape (5, m, n_obs), written for the pairs processed (others untouched):
+            R_obs, R_ego, maximin harm of the road user and of the ego (0 without a
+            step above epsilon), highest p (with ``onset``; else of the evaluated steps).
+        onset_step: shape (m, n_obs), written with ``onset`` (0 without any p > 0).
+        counts: shape (2,), incremented: triples visited and integrals evaluated.
+    """
+    edges = np.empty((weights.shape[1], 6, 8))
+    order = np.empty(n_t, dtype=np.int64)
+    key = np.empty(n_t)
+    bound = np.empty(n_t)
+    probability = np.empty(n_t)
+    pair_out = np.empty(5)
+    start = first
+    while start < last:
+        pair = flat[start] // n_t
+        stop = start + 1
+        while stop < last and flat[stop] // n_t == pair:
+            stop += 1
+        i, obs = pair // n_obs, pair % n_obs
+        _visiting_order(
+            obs_rows,
+            ego_rows,
+            weights,
+            n_t,
+            obs,
+            rows[i],
+            flat,
+            harm_obs,
+            harm_ego,
+            start,
+            stop,
+            bound,
+            key,
+            order,
+        )
+        counts[1] += _pair_maximum(
+            obs_rows,
+            ego_rows,
+            weights,
+            n_t,
+            obs,
+            rows[i],
+            flat,
+            harm_obs,
+            harm_ego,
+            start,
+            stop,
+            epsilon,
+            onset,
+            degenerate,
+            far,
+            bound,
+            order,
+            probability,
+            edges,
+            pair_out,
+        )
+        counts[0] += stop - start
+        for q in range(5):
+            out[q, i, obs] = pair_out[q]
+        if onset:
+            onset_step[i, obs] = 0
+            if pair_out[4] > 0.0:
+                for j in range(stop - start):  # steps ascend within a pair
+                    if probability[j] >= 0.5 * pair_out[4]:
+                        onset_step[i, obs] = flat[start + j] % n_t
+                        break
+        start = stop
+
+
+@kernel
+def _visiting_order(
+    obs_rows: np.ndarray,
+    ego_rows: np.ndarray,
+    weights: np.ndarray,
+    n_t: int,
+    obs: int,
+    row: int,
+    flat: np.ndarray,
+    harm_obs: np.ndarray,
+    harm_ego: np.ndarray,
+    start: int,
+    stop: int,
+    bound: np.ndarray,
+    key: np.ndarray,
+    order: np.ndarray,
+) -> None:
+    """Upper bounds of p from the discs (``bound``) and the visiting order by bound x harm.
+
+    For the triples start:stop of one pair (road user ``obs``, candidate table row
+    ``row``): ``bound[j]`` is the disc bound plus _BOUND_SLACK (a mixture's: the
+    weighted sum of its components' within the gate), ``order[:stop - start]`` sorts
+    them by decreasing bound x max(harm of the road user, harm of the ego).
+    """
+    size = stop - start
+    n_components = weights.shape[1]
+    for j in range(size):
+        step = flat[start + j] % n_t
+        e = row * n_t + step
+        total = 0.0
+        for c in range(n_components):
+            o = (obs * n_components + c) * n_t + step
+            if n_components == 1 or _in_gate(obs_rows, o, ego_rows, e):
+                total += weights[obs * n_t + step, c] * (_disc_bound(obs_rows, o, ego_rows, e) + _BOUND_SLACK)
+        bound[j] = total
+        key[j] = -bound[j] * max(harm_obs[start + j], harm_ego[start + j])
+        order[j] = j
+    for j in range(1, size):  # insertion sort: at most n_t elements
+        value, k = order[j], j
+        while k > 0 and key[order[k - 1]] > key[value]:
+            order[k] = order[k - 1]
+            k -= 1
+        order[k] = value
+
+
+@kernel
+def _pair_maximum(
+    obs_rows: np.ndarray,
+    ego_rows: np.ndarray,
+    weights: np.ndarray,
+    n_t: int,
+    obs: int,
+    row: int,
+    flat: np.ndarray,
+    harm_obs: np.ndarray,
+    harm_ego: np.ndarray,
+    start: int,
+    stop: int,
+    epsilon: float,
+    onset: bool,
+    degenerate: bool,
+    far: float,
+    bound: np.ndarray,
+    order: np.ndarray,
+    probability: np.ndarray,
+    edges: np.ndarray,
+    out: np.ndarray,
+) -> int:
+    """The outputs of one pair (see ``_risk_maximum``), visiting its triples in ``order``.
+
+    Writes ``out`` (5,): R_obs, R_ego, maximin harms of the road user and of the ego,
+    highest p; ``probability[j]`` is p of triple j where evaluated, else -1. Returns the
+    number of integrals evaluated. A mixture's p is sum_c w_c p_c over the components
+    within the gate (the others' p is 0), clipped to [0, 1] as in
+    ``ethical_planner.risk.prediction_collision_probability``; ``edges`` holds one
+    table per component, shape (K, 6, 8).
+    """
+    n_components = weights.shape[1]
+    risk_obs = risk_ego = 0.0
+    worst_obs = worst_ego = -1.0
+    peak = 0.0
+    integrals = 0
+    for j in range(stop - start):
+        probability[j] = -1.0
+    for rank in range(stop - start):
+        j = order[rank]
+        h_obs, h_ego = harm_obs[start + j], harm_ego[start + j]
+        upper = bound[j]
+        for attempt in range(2):
+            if (
+                upper * h_obs <= risk_obs
+                and upper * h_ego <= risk_ego
+                and (upper <= epsilon or (h_obs <= worst_obs and h_ego <= worst_ego))
+                and (not onset or upper < 0.5 * peak)
+            ):
+                break
+            step = flat[start + j] % n_t
+            e = row * n_t + step
+            if attempt == 0:
+                total = 0.0
+                for c in range(n_components):
+                    o = (obs * n_components + c) * n_t + step
+                    if n_components == 1 or _in_gate(obs_rows, o, ego_rows, e):
+                        _octagon_edges(obs_rows, o, ego_rows, e, degenerate, edges[c])
+                        total += weights[obs * n_t + step, c] * (_rectangle_bound(edges[c]) + _BOUND_SLACK)
+                upper = min(upper, total)
+                continue
+            p = 0.0
+            for c in range(n_components):
+                o = (obs * n_components + c) * n_t + step
+                if n_components == 1 or _in_gate(obs_rows, o, ego_rows, e):
+                    p += weights[obs * n_t + step, c] * _octagon_mass(edges[c], far)
+            if n_components > 1:
+                p = min(max(p, 0.0), 1.0)
+            integrals += 1
+            probability[j] = p
+            risk_obs = max(risk_obs, p * h_obs)
+            risk_ego = max(risk_ego, p * h_ego)
+            peak = max(peak, p)
+            if p > epsilon:
+                worst_obs = max(worst_obs, h_obs)
+                worst_ego = max(worst_ego, h_ego)
+    out[0], out[1] = risk_obs, risk_ego
+    out[2], out[3] = max(worst_obs, 0.0), max(worst_ego, 0.0)
+    out[4] = peak
+    return integrals

@@ -15,12 +15,19 @@ from typing import Any
 
 import numpy as np
 
+from ethical_planner.collision_probability import collides
 from ethical_planner.config import PlannerConfig
-from ethical_planner.cost import CostBreakdown, path_deviation, risk_set, total_cost
+from ethical_planner.cost import CostBreakdown, path_deviation, responsibility, risk_set, total_cost
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.prediction import Prediction, Predictor, make_predictor
-from ethical_planner.responsibility import LegalCorridors, responsibilities
-from ethical_planner.risk import RiskAssessment, assess_risk
+from ethical_planner.responsibility import LegalCorridors, collision_onset, responsibilities
+from ethical_planner.risk import (
+    RiskAssessment,
+    assess_risk,
+    outside_drivable_area,
+    prediction_tables,
+    risk_detail,
+)
 from ethical_planner.road_users import EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser, RoadUserType, Shape
 from ethical_planner.sampling import (
     CandidateKind,
@@ -121,8 +128,12 @@ class Decision:
         level_counts: candidates per validity level.
         invalid_counts: physically invalid candidates per broken limit (a candidate
             may break several).
-        best_by_level: the cheapest sampled candidate of each level present, by level
-            (ties broken by comfort plus mobility, as the choice does).
+        best_by_level: the cheapest sampled candidate of each level whose candidates
+            were costed, by level (ties broken by comfort plus mobility, as the choice
+            does). Costs need risk, which is evaluated only for the candidates of the
+            highest level the integral-free tests leave possible (``_Evaluation``):
+            levels below it (physically invalid, collision, leaves the road when a
+            better one exists) have no entry.
         reason: why this candidate.
         emergency: True if the emergency-braking fallback was taken.
         ego_combined_risk: R_ego of the plan (Eq. 4).
@@ -213,13 +224,38 @@ class Decision:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class _Evaluation:
+    """One cycle's candidates evaluated: levels of all, risk and cost of the assessed.
+
+    Risk, responsibility and cost are evaluated for the assessed candidates only: those
+    of the highest level that the integral-free tests (physical limits, predicted mean
+    occupancies, the road edge) leave possible. The others cannot be chosen; their costs
+    are NaN.
+
+    Attributes:
+        candidates: the cycle's n candidates.
+        risk: risk of the m assessed candidates (``risk.rows`` are their indices).
+        r_obs, r_ego: their responsibilities, shape (m, k); None if the responsibility
+            weight is 0 (then only the chosen plan's are computed, for the record).
+        levels: validity level of every candidate, shape (n,).
+        invalid: physically invalid candidates per broken limit, shape (n,) each.
+        costs: cost terms of every candidate, shape (n,) each, NaN where not assessed.
+        risk_obs: R_k of every candidate, shape (n, k), 0 where not assessed.
+        ego_combined: R_ego of every candidate, shape (n,), 0 where not assessed.
+    """
+
     candidates: Candidates
     risk: RiskAssessment
-    r_obs: np.ndarray
-    r_ego: np.ndarray
+    r_obs: np.ndarray | None
+    r_ego: np.ndarray | None
     levels: np.ndarray
     invalid: dict[str, np.ndarray]
     costs: CostBreakdown
+    risk_obs: np.ndarray
+    ego_combined: np.ndarray
+
+    def position(self, index: int) -> int:
+        """Row of candidate ``index`` in the assessed arrays."""
+        return int(np.searchsorted(self.risk.rows, index))
 
 
 class Planner:
@@ -280,74 +316,121 @@ class Planner:
     ) -> _Evaluation:
         config = self.config
         clock = time.perf_counter()
+        n, n_t = candidates.x.shape
+        k = prediction.n_obs
+        # Levels 0, 1 and 2 need no integral: physical limits, then (for the candidates
+        # within them) a predicted mean occupancy, then (for the rest) the road edge.
+        invalid = physically_invalid(candidates, config.vehicle)
+        broken = np.logical_or.reduce(list(invalid.values()))
+        considered = np.flatnonzero(~broken) if not broken.all() else np.arange(n)
+        tables = prediction_tables(
+            candidates, considered, prediction, self.ego_shape, config.risk.gate_sigmas
+        )
+        collision = np.zeros(n, dtype=bool)
+        collision[considered] = collides(tables, np.arange(considered.size))
+        outside = np.zeros((n, n_t), dtype=bool)
+        on_road = considered[~collision[considered]]
+        outside[on_road] = outside_drivable_area(
+            candidates, self.ego_shape, self.environment, config.risk.road_edge_margin, on_road
+        )
+        max_risk = config.risk.max_acceptable_risk
+        possible = validity_levels(
+            invalid, collision[:, None, None], outside, np.zeros((n, k)), np.zeros(n), max_risk
+        )
+        best = int(possible.max())
+        assessed = np.flatnonzero(possible == best)
+        timings["validity"] = timings.get("validity", 0.0) + _since(clock)
+
+        clock = time.perf_counter()
+        position = np.full(n, -1)
+        position[considered] = np.arange(considered.size)
+        with_onset = config.weights.responsibility != 0.0
         risk = assess_risk(
             candidates,
+            assessed,
+            tables,
+            position[assessed],
             prediction,
             self.ego_shape,
             self.ego_mass,
-            self.environment,
+            outside[assessed],
             config.risk,
+            config.weights.maximin_epsilon,
+            with_onset,
             self.workers,
         )
+        risk_obs = np.zeros((n, k))
+        risk_obs[assessed] = risk.risk_obs
+        ego_combined = np.zeros(n)
+        ego_combined[assessed] = risk.ego_combined
+        levels = validity_levels(invalid, collision[:, None, None], outside, risk_obs, ego_combined, max_risk)
         timings["risk"] = timings.get("risk", 0.0) + _since(clock)
+
         clock = time.perf_counter()
-        r_obs, r_ego = responsibilities(
-            candidates,
-            risk.probability,
-            prediction,
-            corridors,
-            self.ego_mass,
-            config.responsibility,
-        )
+        r_obs = r_ego = None
+        if with_onset:
+            r_obs, r_ego = responsibilities(
+                candidates,
+                assessed,
+                risk.peak_probability,
+                risk.onset_step,
+                prediction,
+                corridors,
+                self.ego_mass,
+                config.responsibility,
+            )
         timings["responsibility"] = timings.get("responsibility", 0.0) + _since(clock)
+
         clock = time.perf_counter()
-        invalid = physically_invalid(candidates, config.vehicle)
-        levels = validity_levels(
-            invalid,
-            risk.mean_overlap,
-            risk.outside_road,
-            risk.risk_obs,
-            risk.ego_combined,
-            config.risk.max_acceptable_risk,
-        )
-        timings["validity"] = timings.get("validity", 0.0) + _since(clock)
-        clock = time.perf_counter()
-        n = candidates.n_traj
-        leaves = risk.outside_road.any(axis=1)
+        costs = _full_costs(self._costs(candidates, risk, r_obs, r_ego, levels), assessed, n)
+        timings["cost"] = timings.get("cost", 0.0) + _since(clock)
+        return _Evaluation(candidates, risk, r_obs, r_ego, levels, invalid, costs, risk_obs, ego_combined)
+
+    def _costs(
+        self,
+        candidates: Candidates,
+        risk: RiskAssessment,
+        r_obs: np.ndarray | None,
+        r_ego: np.ndarray | None,
+        levels: np.ndarray,
+    ) -> CostBreakdown:
+        """Eqs. 5-11 of the assessed candidates ``risk.rows``.
+
+        Without responsibilities (weight 0) J_R is left 0: it does not enter the total.
+        """
+        config = self.config
+        rows = risk.rows
+        m, k = risk.risk_obs.shape
+        leaves = risk.leaves_road
         risks, present = risk_set(risk.risk_obs, risk.risk_ego, risk.boundary_risk, leaves)
-        r = np.concatenate([r_obs, r_ego, np.zeros((n, 1))], axis=1)
-        counted_p = risk.probability > config.weights.maximin_epsilon
+        if r_obs is None:
+            r = np.zeros((m, 2 * k + 1))
+        else:
+            r = np.concatenate([r_obs, r_ego, np.zeros((m, 1))], axis=1)
+        # Maximin's harms are those at steps above epsilon already (0 where none is).
         harms = np.concatenate(
-            [
-                np.where(counted_p, risk.harm_obs, 0.0).max(axis=2, initial=0.0),
-                np.where(counted_p, risk.harm_ego, 0.0).max(axis=2, initial=0.0),
-                risk.boundary_risk[:, None],
-            ],
-            axis=1,
+            [risk.maximin_harm_obs, risk.maximin_harm_ego, risk.boundary_risk[:, None]], axis=1
         )
-        counted_pair = counted_p.any(axis=2)  # the same collisions count for both bodies
-        counted = np.concatenate([counted_pair, counted_pair, leaves[:, None]], axis=1)
-        costs = total_cost(
+        counted = np.concatenate([np.ones((m, 2 * k), dtype=bool), leaves[:, None]], axis=1)
+        return total_cost(
             risks,
             present,
             r,
             harms,
             counted,
             risk.ego_combined,
-            candidates.jerk_lon,
-            candidates.jerk_lat,
-            np.abs(candidates.v - self.desired_speed).mean(axis=1),
+            candidates.jerk_lon[rows],
+            candidates.jerk_lat[rows],
+            np.abs(candidates.v[rows] - self.desired_speed).mean(axis=1),
             *path_deviation(
-                candidates.d,
+                candidates.d[rows],
                 self.environment.lane_offsets,
                 self.environment.lane_width,
                 config.weights.path_reference,
             ),
-            levels,
+            levels[rows],
             config.weights,
         )
-        timings["cost"] = timings.get("cost", 0.0) + _since(clock)
-        return _Evaluation(candidates, risk, r_obs, r_ego, levels, invalid, costs)
 
     def plan(
         self,
@@ -485,8 +568,7 @@ class Planner:
         costs = grid.costs
         eq5 = self.config.weights.risk * costs.risk + costs.comfort + costs.mobility
         best = int(refused[np.argmin(eq5[refused])])
-        risk = grid.risk
-        worst = max(float(risk.ego_combined[best]), float(risk.risk_obs[best].max(initial=0.0)))
+        worst = max(float(grid.ego_combined[best]), float(grid.risk_obs[best].max(initial=0.0)))
         return (
             f"; R_max refused {refused.size} cheaper candidates (cheapest: "
             f"{_describe(grid.candidates, best)}, Eq. 5 cost {eq5[best]:.4g}, risk {worst:.3g} > "
@@ -522,21 +604,51 @@ class Planner:
         road_users: Sequence[RoadUser],
         timings: dict[str, float],
     ) -> Decision:
-        risk = chosen.risk
-        p = risk.probability[index]  # (k, t)
+        config = self.config
+        risk, j = chosen.risk, chosen.position(index)
+        detail = risk_detail(
+            chosen.candidates,
+            index,
+            prediction,
+            self.ego_shape,
+            self.ego_mass,
+            config.risk,
+        )
+        p = detail.probability  # (k, t)
         peak = p.argmax(axis=1) if p.shape[1] else np.zeros(p.shape[0], dtype=int)
+        costs = chosen.costs.row(index)
+        if chosen.r_obs is None:
+            # Responsibility carries no weight: the chosen plan's alone, for the record.
+            r_obs, r_ego = responsibilities(
+                chosen.candidates,
+                np.array([index]),
+                *(value[None] for value in collision_onset(p)),
+                prediction,
+                LegalCorridors.of(road_users, self.environment),
+                self.ego_mass,
+                config.responsibility,
+            )
+            r_obs, r_ego = r_obs[0], r_ego[0]
+            leaves = chosen.risk.boundary_risk[j : j + 1] > 0.0
+            risks, present = risk_set(
+                risk.risk_obs[j : j + 1], risk.risk_ego[j : j + 1], risk.boundary_risk[j : j + 1], leaves
+            )
+            r = np.concatenate([r_obs, r_ego, [0.0]])[None]
+            costs["responsibility"] = float(responsibility(risks, r, present)[0])
+        else:
+            r_obs, r_ego = chosen.r_obs[j], chosen.r_ego[j]
         rows = np.arange(p.shape[0])
         assessments = tuple(
             RoadUserAssessment(
                 id=int(prediction.ids[k]),
                 type=prediction.types[k],
-                risk=float(risk.risk_obs[index, k]),
-                ego_risk=float(risk.risk_ego[index, k]),
+                risk=float(risk.risk_obs[j, k]),
+                ego_risk=float(risk.risk_ego[j, k]),
                 collision_probability=float(p[k].max(initial=0.0)),
-                harm=float(risk.harm_obs[index, k, peak[k]]),
-                ego_harm=float(risk.harm_ego[index, k, peak[k]]),
-                responsibility=float(chosen.r_obs[index, k]),
-                ego_responsibility=float(chosen.r_ego[index, k]),
+                harm=float(detail.harm_obs[k, peak[k]]),
+                ego_harm=float(detail.harm_ego[k, peak[k]]),
+                responsibility=float(r_obs[k]),
+                ego_responsibility=float(r_ego[k]),
             )
             for k in rows
         )
@@ -554,10 +666,10 @@ class Planner:
             best_by_level=_best_by_level(grid),
             reason=reason,
             emergency=emergency,
-            ego_combined_risk=float(risk.ego_combined[index]),
-            boundary_risk=float(risk.boundary_risk[index]),
-            max_acceptable_risk=self.config.risk.max_acceptable_risk,
-            costs=chosen.costs.row(index),
+            ego_combined_risk=float(risk.ego_combined[j]),
+            boundary_risk=float(risk.boundary_risk[j]),
+            max_acceptable_risk=config.risk.max_acceptable_risk,
+            costs=costs,
             road_users=assessments,
             timings_ms={k: round(v, 3) for k, v in timings.items()},
             candidate_x=grid.candidates.x,
@@ -568,14 +680,27 @@ class Planner:
 
 
 def _best_by_level(grid: _Evaluation) -> dict[int, LevelBest]:
-    """The cheapest candidate of every level present (one sort, no loop over candidates)."""
+    """The cheapest candidate of every level costed (one sort, no loop over candidates)."""
     costs = grid.costs
-    order = np.lexsort((costs.comfort + costs.mobility, costs.total, grid.levels))
+    rows = grid.risk.rows
+    order = rows[
+        np.lexsort((costs.comfort[rows] + costs.mobility[rows], costs.total[rows], grid.levels[rows]))
+    ]
     levels, first = np.unique(grid.levels[order], return_index=True)
     return {
         int(level): LevelBest(int(i), float(costs.total[i]), CandidateParameters.of(grid.candidates, int(i)))
         for level, i in zip(levels, order[first], strict=True)
     }
+
+
+def _full_costs(costs: CostBreakdown, rows: np.ndarray, n: int) -> CostBreakdown:
+    """``costs`` of candidates ``rows`` spread over all n candidates, NaN for the others."""
+    full = {}
+    for name in CostBreakdown.__slots__:
+        values = np.full(n, np.nan)
+        values[rows] = getattr(costs, name)
+        full[name] = values
+    return CostBreakdown(**full)
 
 
 def _describe(candidates: Candidates, index: int) -> str:

@@ -112,6 +112,19 @@ class LegalCorridors:
         return lowest, np.minimum(highest, self.stop_distance)
 
 
+def collision_onset(probability: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Highest collision probability and the first step where p reaches half of it.
+
+    Args:
+        probability: p over the steps, shape (..., t).
+
+    Returns:
+        (peak, onset), shape (...) each; onset is 0 where p is 0 throughout.
+    """
+    peak = probability.max(axis=-1)
+    return peak, np.argmax(probability >= 0.5 * peak[..., None], axis=-1)
+
+
 def base_responsibility(mass: np.ndarray, motorised: np.ndarray, config: ResponsibilityConfig) -> np.ndarray:
     """r_base = base_max (1 - exp(-m / scale)) for motorised road users, else 0."""
     base = config.base_max * (1.0 - np.exp(-np.asarray(mass) / config.base_mass_scale))
@@ -120,7 +133,9 @@ def base_responsibility(mass: np.ndarray, motorised: np.ndarray, config: Respons
 
 def responsibilities(
     candidates: Candidates,
-    probability: np.ndarray,
+    rows: np.ndarray,
+    peak: np.ndarray,
+    onset: np.ndarray,
     prediction: Prediction,
     corridors: LegalCorridors,
     ego_mass: float,
@@ -128,33 +143,35 @@ def responsibilities(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Responsibility of each road user and of the ego for each potential collision.
 
+    The geometry of a potential collision is read at its onset: the first step at which
+    the collision probability reaches half its peak. (At the peak itself the predicted
+    means may already overlap deeply and the centres have passed each other: a rear-end
+    would look like the leader running into the follower.)
+
     Args:
-        candidates: n candidates.
-        probability: p_k(u, t), shape (n, k, t).
+        candidates: the cycle's candidates.
+        rows: the m candidates to assess, indices into ``candidates``.
+        peak: highest collision probability of each pair, shape (m, k).
+        onset: first step at which p reaches half its peak, shape (m, k).
         prediction: k road users.
         corridors: their legal corridors.
         ego_mass: [kg].
         config: magnitudes.
 
     Returns:
-        (r_obs, r_ego), shape (n, k) each: responsibility of road user k for the risk
+        (r_obs, r_ego), shape (m, k) each: responsibility of road user k for the risk
         it runs, and of the ego for the risk it runs in a collision with k.
     """
-    n, k, _ = probability.shape
+    n, k = peak.shape
     base_obs = np.broadcast_to(base_responsibility(prediction.mass, prediction.motorised, config), (n, k))
     base_ego = np.full((n, k), float(base_responsibility(np.array(ego_mass), np.array(True), config)))
     r_obs, r_ego = base_obs, base_ego
-    if k == 0:
+    if k == 0 or n == 0:
         return r_obs, r_ego
-    n_t = probability.shape[2]
-    # The geometry of the first contact: the first step at which the collision
-    # probability reaches half its peak. (At the peak itself the predicted means may
-    # already overlap deeply and the centres have passed each other: a rear-end would
-    # look like the leader running into the follower.)
-    peak = probability.max(axis=2)  # (n, k)
-    step = np.argmax(probability >= 0.5 * peak[..., None], axis=2)
-    # Rows of the (traj, t) and (obs, t) tables at the peak step, gathered flat.
-    ego_row = np.arange(n)[:, None] * n_t + step
+    n_t = candidates.t.size
+    step = onset
+    # Rows of the (traj, t) and (obs, t) tables at the onset step, gathered flat.
+    ego_row = np.asarray(rows)[:, None] * n_t + step
     obs_row = np.arange(k)[None, :] * n_t + step
     ex, ey = candidates.x.ravel()[ego_row], candidates.y.ravel()[ego_row]
     eyaw = candidates.yaw.ravel()[ego_row]

@@ -1,8 +1,10 @@
-"""Risk of every candidate for every road user (paper Eqs. 3 and 4), vectorised.
+"""Risk of candidates for every road user (paper Eqs. 3 and 4).
 
-Shapes: n candidates, k road users, t time steps. Harm is evaluated only where the
-collision probability survived the distance gate (p > 0), which is what keeps the
-cycle fast with many road users.
+Shapes: m assessed candidates, k road users, t time steps. The collision probability
+is integrated only where it can change a result: at triples that pass the distance gate,
+and among those only where an upper bound of p H does not show that the maximum over
+time (Eq. 3), maximin's set (p > epsilon) or the responsibility's onset stays as it is
+(``collision_probability.risk_maximum``). Harm is evaluated at the gated triples.
 """
 
 from __future__ import annotations
@@ -12,7 +14,14 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from ethical_planner.collision_probability import CollisionProbability, collision_probability
+from ethical_planner.collision_probability import (
+    CollisionProbability,
+    OctagonTables,
+    collision_probability,
+    gate,
+    octagon_tables,
+    risk_maximum,
+)
 from ethical_planner.config import RiskConfig
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.geometry import rectangle_corners
@@ -25,36 +34,54 @@ from ethical_planner.workers import Workers
 
 @dataclass(frozen=True, slots=True, eq=False)
 class RiskAssessment:
-    """Collision probability, harm and risk of all candidates.
+    """Risk of the assessed candidates, per (candidate, road user) pair and per candidate.
 
     Attributes:
-        probability: p_k(u, t), shape (n, k, t).
-        mean_overlap: footprints overlap at the predicted mean, shape (n, k, t).
-        harm_obs: harm of road user k if it collides at t, shape (n, k, t) (0 where p = 0).
-        harm_ego: harm of the ego in that collision, shape (n, k, t).
-        risk_obs: R_k(u) = max_t p H_obs, shape (n, k) (Eq. 3).
-        risk_ego: R_ego,k(u) = max_t p H_ego, shape (n, k).
-        peak_step: step of the highest collision probability, shape (n, k).
-        outside_road: the ego footprint leaves the drivable area, shape (n, t).
-        boundary_risk: harm of hitting a wall at the first step outside (p = 1), shape (n,).
-        ego_combined: R_ego(u) = 1 - prod(1 - R_ego,k) incl. the boundary, shape (n,) (Eq. 4).
+        rows: the assessed candidates' indices in the cycle's candidate set, shape (m,).
+        risk_obs: R_k = max_t p H_obs, shape (m, k) (Eq. 3).
+        risk_ego: R_ego,k = max_t p H_ego, shape (m, k).
+        maximin_harm_obs: highest harm of road user k at a step where its collision
+            probability exceeds maximin's epsilon, 0 if none, shape (m, k) (Eq. 10).
+        maximin_harm_ego: the ego's harm in those collisions, shape (m, k).
+        peak_probability: highest p_k(t), shape (m, k); exact with ``onset``.
+        onset_step: first step at which p_k reaches half its peak, shape (m, k) (with
+            ``onset``; 0 otherwise and where p is 0 throughout).
+        leaves_road: the footprint leaves the drivable area at some step, shape (m,).
+        boundary_risk: harm of hitting a wall at the first step outside the road (p = 1),
+            shape (m,).
+        ego_combined: R_ego(u) = 1 - prod(1 - R_ego,k) incl. the boundary, shape (m,) (Eq. 4).
+        triples: (candidate, road user, step) triples that passed the distance gate.
+        integrals: collision-probability integrals evaluated among them.
+    """
+
+    rows: np.ndarray
+    risk_obs: np.ndarray
+    risk_ego: np.ndarray
+    maximin_harm_obs: np.ndarray
+    maximin_harm_ego: np.ndarray
+    peak_probability: np.ndarray
+    onset_step: np.ndarray
+    leaves_road: np.ndarray
+    boundary_risk: np.ndarray
+    ego_combined: np.ndarray
+    triples: int
+    integrals: int
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class RiskDetail:
+    """Every step of one candidate: what the decision record shows of the chosen plan.
+
+    Attributes:
+        probability: p_k(t), shape (k, t), evaluated at every step that passes the gate.
+        harm_obs: harm of road user k if it collides at t, shape (k, t) (0 where p = 0).
+        harm_ego: the ego's harm in that collision, shape (k, t).
     """
 
     probability: np.ndarray
-    mean_overlap: np.ndarray
     harm_obs: np.ndarray
     harm_ego: np.ndarray
-    risk_obs: np.ndarray
-    risk_ego: np.ndarray
-    peak_step: np.ndarray
-    outside_road: np.ndarray
-    boundary_risk: np.ndarray
-    ego_combined: np.ndarray
 
-
-#: From this many candidate poses (n * n_t) the road-edge test overlaps the collision
-#: probability on a helper thread.
-_OVERLAP_MIN_POSES = 20_000
 
 #: Extra inward margin [m] of the eroded drivable area, above the sagitta of shapely's
 #: arc approximation (r (1 - cos(pi / 32)) < 0.5 % of r at quad_segs = 8) and rounding.
@@ -77,7 +104,11 @@ def _eroded_area(area: shapely.Geometry, radius: float) -> shapely.Geometry:
 
 
 def outside_drivable_area(
-    candidates: Candidates, shape: Shape, environment: RoadEnvironment, margin: float = 0.0
+    candidates: Candidates,
+    shape: Shape,
+    environment: RoadEnvironment,
+    margin: float = 0.0,
+    rows: np.ndarray | None = None,
 ) -> np.ndarray:
     """True where the ego footprint comes within ``margin`` [m] of the edge, shape (n, t).
 
@@ -87,28 +118,33 @@ def outside_drivable_area(
     half-diagonal has all corners inside, so only the other centres (near the road
     edge) get the corner test; if the area has holes (debris on the road), footprints
     with all corners inside then get the exact polygon containment test.
+
+    Args:
+        candidates: anything with x, y, yaw arrays of shape (n, t) [m, rad].
+        shape: the ego's footprint.
+        environment: the road.
+        margin: [m].
+        rows: only these candidates (the result then has shape (len(rows), t)).
     """
     area = environment.drivable_area
     shape = Shape(shape.length + 2.0 * margin, shape.width + 2.0 * margin)
     half_diagonal = 0.5 * float(np.hypot(shape.length, shape.width))
-    deep = shapely.contains_xy(_eroded_area(area, half_diagonal), candidates.x, candidates.y)
-    outside = np.zeros(candidates.x.shape, dtype=bool)
+    x, y, yaw = candidates.x, candidates.y, candidates.yaw
+    if rows is not None:
+        x, y, yaw = x[rows], y[rows], yaw[rows]
+    deep = shapely.contains_xy(_eroded_area(area, half_diagonal), x, y)
+    outside = np.zeros(x.shape, dtype=bool)
     edge = np.flatnonzero(~deep)
     if edge.size:
-        cx, cy = rectangle_corners(
-            candidates.x.ravel()[edge],
-            candidates.y.ravel()[edge],
-            candidates.yaw.ravel()[edge],
-            shape.length,
-            shape.width,
-        )
+        poses = (x.ravel()[edge], y.ravel()[edge], yaw.ravel()[edge])
+        cx, cy = rectangle_corners(*poses, shape.length, shape.width)
         corners_in = np.all(shapely.contains_xy(area, cx, cy), axis=-1)
         holes = _holes(area)
         if holes is not None and corners_in.any():
             # A hole (debris) smaller than the footprint can lie between its corners:
             # footprints with all corners inside and near a hole get the exact test.
             near = np.flatnonzero(corners_in)
-            px, py = candidates.x.ravel()[edge[near]], candidates.y.ravel()[edge[near]]
+            px, py = x.ravel()[edge[near]], y.ravel()[edge[near]]
             near = near[shapely.dwithin(holes, shapely.points(px, py), half_diagonal)]
             if near.size:
                 ring = np.stack([cx[near], cy[near]], axis=-1)
@@ -118,50 +154,68 @@ def outside_drivable_area(
     return outside
 
 
+def _components(prediction: Prediction) -> tuple[np.ndarray, ...]:
+    """The prediction's Gaussians as road users of their own: (mean, cov, heading, length, width).
+
+    A mixture's road user o's component c becomes virtual road user o * K + c (K = 1:
+    the prediction's own arrays).
+    """
+    k = prediction.n_components
+    if k == 1:
+        return prediction.mean, prediction.cov, prediction.heading, prediction.length, prediction.width
+    n_obs, n_t = prediction.mean.shape[:2]
+    return (
+        np.repeat(prediction.mean, k, axis=0),
+        np.moveaxis(prediction.component_cov, 2, 1).reshape(n_obs * k, n_t, 2, 2),
+        np.repeat(prediction.heading, k, axis=0),
+        np.repeat(prediction.length, k),
+        np.repeat(prediction.width, k),
+    )
+
+
 def prediction_collision_probability(
     candidates: Candidates,
     prediction: Prediction,
     ego_shape: Shape,
     gate_sigmas: float,
     workers: Workers | None = None,
+    rows: np.ndarray | None = None,
 ) -> CollisionProbability:
-    """Collision probabilities of every candidate with every predicted road user.
+    """Collision probabilities of every candidate with every predicted road user, every triple.
 
     A Gaussian-mixture prediction (K components with a shared mean) is integrated in
     one call with each component as a road user of its own; its probability is the
     weighted sum sum_k w_k(t) p_k(u, t), and the mean overlap that of the shared mean.
 
+    Args:
+        candidates: the cycle's candidates.
+        prediction: the road users.
+        ego_shape: the ego's footprint.
+        gate_sigmas: see ``collision_probability``.
+        workers: threads for large problems.
+        rows: only these candidates (default all).
+
     Returns:
-        Probabilities and mean overlaps, shape (n, n_obs, n_t).
+        Probabilities and mean overlaps, shape (n, n_obs, n_t) (n = len(rows) if given).
     """
+    x, y, yaw = candidates.x, candidates.y, candidates.yaw
+    if rows is not None:
+        x, y, yaw = x[rows], y[rows], yaw[rows]
     k = prediction.n_components
-    if k == 1:
-        mean, cov, heading = prediction.mean, prediction.cov, prediction.heading
-        length, width = prediction.length, prediction.width
-    else:
-        n_obs, n_t = prediction.mean.shape[:2]
-        # Road user o's component c becomes virtual road user o * K + c.
-        mean = np.repeat(prediction.mean, k, axis=0)
-        cov = np.moveaxis(prediction.component_cov, 2, 1).reshape(n_obs * k, n_t, 2, 2)
-        heading = np.repeat(prediction.heading, k, axis=0)
-        length, width = np.repeat(prediction.length, k), np.repeat(prediction.width, k)
     cp = collision_probability(
-        candidates.x,
-        candidates.y,
-        candidates.yaw,
+        x,
+        y,
+        yaw,
         ego_shape.length,
         ego_shape.width,
-        mean,
-        cov,
-        heading,
-        length,
-        width,
+        *_components(prediction),
         gate_sigmas=gate_sigmas,
         workers=workers,
     )
     if k == 1:
         return cp
-    n = candidates.x.shape[0]
+    n = x.shape[0]
+    n_obs, n_t = prediction.mean.shape[:2]
     per_component = cp.probability.reshape(n, n_obs, k, n_t)
     probability = np.einsum("nokt,otk->not", per_component, prediction.component_weight)
     return CollisionProbability(np.clip(probability, 0.0, 1.0), cp.mean_overlap[:, ::k])
@@ -178,125 +232,161 @@ def _holes(area: shapely.Geometry) -> shapely.Geometry | None:
     return holes
 
 
+def prediction_tables(
+    candidates: Candidates,
+    rows: np.ndarray,
+    prediction: Prediction,
+    ego_shape: Shape,
+    gate_sigmas: float,
+) -> OctagonTables:
+    """The octagon tables (``octagon_tables``) of candidates ``rows`` and the prediction.
+
+    A mixture's components are the tables' components (``component_weight``): its p is
+    the weighted sum of theirs, as in ``prediction_collision_probability``.
+    """
+    x, y, yaw = candidates.x[rows], candidates.y[rows], candidates.yaw[rows]
+    weight = prediction.component_weight if prediction.n_components > 1 else None
+    return octagon_tables(
+        x,
+        y,
+        yaw,
+        ego_shape.length,
+        ego_shape.width,
+        *_components(prediction),
+        gate_sigmas=gate_sigmas,
+        component_weight=weight,
+    )
+
+
 def assess_risk(
     candidates: Candidates,
+    rows: np.ndarray,
+    tables: OctagonTables,
+    table_rows: np.ndarray,
     prediction: Prediction,
     ego_shape: Shape,
     ego_mass: float,
-    environment: RoadEnvironment,
+    outside: np.ndarray,
     config: RiskConfig,
+    epsilon: float,
+    onset: bool = False,
     workers: Workers | None = None,
 ) -> RiskAssessment:
-    """Collision probability, harm and risk of every candidate for every road user.
+    """Risk of candidates ``rows`` for every road user (Eqs. 3, 4) and maximin's harms.
 
     Delta-v by ``config.delta_v_model``: paper Eq. 1 or the planar impulse model
     (``ethical_planner.impulse``), whose contact comes from the two footprints.
-    ``workers`` lends its threads to large problems (a planner
-    passes its own; None makes a fresh one for this call).
+
+    Args:
+        candidates: the cycle's candidates.
+        rows: the candidates to assess, indices into ``candidates``, shape (m,).
+        tables: the octagon tables of the cycle for the prediction (``prediction_tables``).
+        table_rows: the same candidates' rows in ``tables``, shape (m,).
+        prediction: the k road users.
+        ego_shape: the ego's footprint [m].
+        ego_mass: [kg].
+        outside: the ego footprint leaves the drivable area, shape (m, t)
+            (``outside_drivable_area``).
+        config: harm models, boundary harm.
+        epsilon: maximin's collision-probability threshold (``CostWeights.maximin_epsilon``).
+        onset: also find each pair's highest p and its onset exactly (responsibility).
+        workers: threads for large problems (a planner passes its own).
     """
     workers = Workers() if workers is None else workers
-    n, n_t = candidates.x.shape
-    k = prediction.n_obs
-    # shapely releases the GIL: on large problems the road-edge test runs on a helper
-    # thread beside the collision probability (on small ones the hand-over costs more).
-    outside_job = None
-    if k and n * n_t >= _OVERLAP_MIN_POSES:
-        outside_job = workers.submit(
-            lambda: outside_drivable_area(candidates, ego_shape, environment, config.road_edge_margin)
-        )
-    cp = prediction_collision_probability(candidates, prediction, ego_shape, config.gate_sigmas, workers)
-    p = cp.probability
-    harm_obs = np.zeros((n, k, n_t))
-    harm_ego = np.zeros((n, k, n_t))
-    risk_obs = np.zeros((n, k))
-    risk_ego = np.zeros((n, k))
-    # Triples with p > 0, in (traj, obs, t) order.
-    flat = np.flatnonzero(p > 0.0)
-    if flat.size:
-        _harm_and_risk(
-            candidates,
-            prediction,
-            ego_mass,
-            config,
-            p,
-            flat,
-            ego_shape,
-            (harm_obs, harm_ego, risk_obs, risk_ego),
-            workers,
-        )
-    peak_step = p.argmax(axis=2) if n_t else np.zeros((n, k), dtype=int)
-
-    outside = (
-        outside_drivable_area(candidates, ego_shape, environment, config.road_edge_margin)
-        if outside_job is None
-        else outside_job.result()
+    rows = np.asarray(rows, dtype=np.int64)
+    flat = gate(tables, table_rows)
+    harm_obs, harm_ego = _triple_harms(
+        candidates, rows, prediction, ego_mass, ego_shape, config, flat, workers
     )
-    boundary = np.zeros(n)
-    if config.boundary_harm:
-        leaves = outside.any(axis=1)
+    maximum = risk_maximum(tables, table_rows, flat, harm_obs, harm_ego, epsilon, onset, workers)
+    m = rows.size
+    boundary = np.zeros(m)
+    leaves = outside.any(axis=1)
+    if config.boundary_harm and m:
         first = outside.argmax(axis=1)
-        boundary = np.where(leaves, boundary_harm(candidates.v[np.arange(n), first]), 0.0)
-    survive = np.prod(1.0 - risk_ego, axis=1) * (1.0 - boundary)
+        boundary = np.where(leaves, boundary_harm(candidates.v[rows, first]), 0.0)
+    survive = np.prod(1.0 - maximum.risk_ego, axis=1) * (1.0 - boundary)
     return RiskAssessment(
-        probability=p,
-        mean_overlap=cp.mean_overlap,
-        harm_obs=harm_obs,
-        harm_ego=harm_ego,
-        risk_obs=risk_obs,
-        risk_ego=risk_ego,
-        peak_step=peak_step,
-        outside_road=outside,
+        rows=rows,
+        risk_obs=maximum.risk_obs,
+        risk_ego=maximum.risk_ego,
+        maximin_harm_obs=maximum.maximin_harm_obs,
+        maximin_harm_ego=maximum.maximin_harm_ego,
+        peak_probability=maximum.peak_probability,
+        onset_step=maximum.onset_step,
+        leaves_road=leaves,
         boundary_risk=boundary,
         ego_combined=1.0 - survive,
+        triples=maximum.triples,
+        integrals=maximum.integrals,
     )
+
+
+def risk_detail(
+    candidates: Candidates,
+    index: int,
+    prediction: Prediction,
+    ego_shape: Shape,
+    ego_mass: float,
+    config: RiskConfig,
+) -> RiskDetail:
+    """Collision probability and harm of candidate ``index`` at every step (the record).
+
+    Every triple that passes the gate is integrated (``prediction_collision_probability``);
+    the harms are those of ``assess_risk``, so the maximum over t of p H equals its R.
+    """
+    rows = np.array([index])
+    p = prediction_collision_probability(
+        candidates, prediction, ego_shape, config.gate_sigmas, Workers(1), rows
+    )
+    p = p.probability[0]
+    harm_obs = np.zeros(p.shape)
+    harm_ego = np.zeros(p.shape)
+    flat = np.flatnonzero(p > 0.0)
+    if flat.size:
+        harm_obs.ravel()[flat], harm_ego.ravel()[flat] = _triple_harms(
+            candidates, rows, prediction, ego_mass, ego_shape, config, flat, Workers(1)
+        )
+    return RiskDetail(p, harm_obs, harm_ego)
 
 
 #: Triples per harm evaluation: the temporaries of ``collision_harm`` then stay small and
 #: are reused instead of page-faulting. With two threads (from _HARM_PARALLEL_MIN triples
 #: on) the chunks are a quarter of the work each: numpy must run long loops between
-#: Python statements for two threads to pay off (see collision_probability._CHUNK_THREADED).
+#: Python statements for two threads to pay off.
 _HARM_CHUNK = 16384
 _HARM_PARALLEL_MIN = 100_000
 
 
-def _harm_and_risk(
+def _triple_harms(
     candidates: Candidates,
+    rows: np.ndarray,
     prediction: Prediction,
     ego_mass: float,
-    config: RiskConfig,
-    p: np.ndarray,
-    flat: np.ndarray,
     ego_shape: Shape,
-    out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    config: RiskConfig,
+    flat: np.ndarray,
     workers: Workers,
-) -> None:
-    """Harm at the triples with p > 0 and the risks R = max_t p H (Eq. 3), in chunks.
+) -> tuple[np.ndarray, np.ndarray]:
+    """Harm of the road user and of the ego at triples (i, obs, step), in chunks.
 
     Args:
-        candidates: the n candidates.
+        candidates: the cycle's candidates.
+        rows: candidate of each i, indices into ``candidates``, shape (m,).
         prediction: the k road users.
         ego_mass: [kg].
-        config: harm models.
-        p: collision probabilities, shape (n, k, t).
-        flat: flat indices of the triples with p > 0, ascending, shape (m,).
         ego_shape: the ego's footprint (used by the planar delta-v model).
-        out: harm_obs, harm_ego (n, k, t) and risk_obs, risk_ego (n, k), zeros, written.
+        config: harm models.
+        flat: flat triple indices (i * k + obs) * n_t + step, shape (q,).
         workers: threads for large problems.
+
+    Returns:
+        (harm_obs, harm_ego), shape (q,) each.
     """
-    n_traj, k, n_t = p.shape
-    harm_obs, harm_ego, risk_obs, risk_ego = out
-    # Velocities per (traj, t) and (obs, t) once, then gathered: trigonometry on the
-    # small tables instead of on every triple.
-    ego_yaw = candidates.yaw.ravel()
-    ego_table = np.stack(
-        [
-            candidates.x.ravel(),
-            candidates.y.ravel(),
-            ego_yaw,
-            candidates.v.ravel() * np.cos(ego_yaw),
-            candidates.v.ravel() * np.sin(ego_yaw),
-        ]
-    )
+    n_t = candidates.t.size
+    k = prediction.n_obs
+    harm_obs = np.empty(flat.size)
+    harm_ego = np.empty(flat.size)
     obs_yaw = prediction.heading.ravel()
     obs_speed = prediction.speed.ravel()
     obs_table = np.stack(
@@ -308,40 +398,32 @@ def _harm_and_risk(
             obs_speed * np.sin(obs_yaw),
         ]
     )
-    obs_mass = prediction.mass
-    obs_unprotected = prediction.vulnerable
+    ego_x, ego_y, ego_yaw, ego_v = (getattr(candidates, name).ravel() for name in ("x", "y", "yaw", "v"))
     obs_round = np.array([t is RoadUserType.PEDESTRIAN for t in prediction.types], dtype=bool)
     model = HarmModel(config.harm_model)
     pedestrian_model = HarmModel(config.pedestrian_model)
-    # Chunk boundaries at the start of a (traj, obs) pair, so that each chunk owns the
-    # risks of its pairs: chunks then write disjoint parts of every output.
     size = _HARM_CHUNK
     if flat.size >= _HARM_PARALLEL_MIN and workers.threads > 1:
         size = max(size, -(-flat.size // 4))
-    cuts = [0]
-    while cuts[-1] + size < flat.size:
-        pair_start = (flat[cuts[-1] + size] // n_t) * n_t
-        cut = int(np.searchsorted(flat, pair_start))
-        cuts.append(cut if cut > cuts[-1] else cuts[-1] + size)
-    cuts.append(flat.size)
-    p_flat = p.ravel()
+    cuts = list(range(0, flat.size, size)) + [flat.size]
 
     def run(part: tuple[int, int]) -> None:
         f = flat[part[0] : part[1]]
         pair, step = np.divmod(f, n_t)
-        traj, obs = np.divmod(pair, k)
-        ego = ego_table.take(traj * n_t + step, axis=1)
+        i, obs = np.divmod(pair, k)
+        point = rows.take(i) * n_t + step
+        yaw, speed = ego_yaw.take(point), ego_v.take(point)
         obs_now = obs_table.take(obs * n_t + step, axis=1)
         result = collision_harm(
             ego_mass=ego_mass,
-            ego_vel=ego[3:5].T,
-            ego_pos=ego[0:2].T,
-            ego_yaw=ego[2],
-            obs_mass=obs_mass.take(obs),
+            ego_vel=np.stack([speed * np.cos(yaw), speed * np.sin(yaw)], axis=-1),
+            ego_pos=np.stack([ego_x.take(point), ego_y.take(point)], axis=-1),
+            ego_yaw=yaw,
+            obs_mass=prediction.mass.take(obs),
             obs_vel=obs_now[3:5].T,
             obs_pos=obs_now[0:2].T,
             obs_yaw=obs_now[2],
-            obs_unprotected=obs_unprotected.take(obs),
+            obs_unprotected=prediction.vulnerable.take(obs),
             model=model,
             pedestrian_model=pedestrian_model,
             delta_v_model=config.delta_v_model,
@@ -351,14 +433,9 @@ def _harm_and_risk(
             ego_shape=(ego_shape.length, ego_shape.width),
             obs_shape=(prediction.length.take(obs), prediction.width.take(obs)),
         )
-        harm_obs.ravel()[f] = result.harm_obs
-        harm_ego.ravel()[f] = result.harm_ego
-        # p H is 0 where p = 0, so the maximum over the surviving steps of a pair equals
-        # the maximum over all its steps (R >= 0).
-        p_f = p_flat.take(f)
-        starts = np.flatnonzero(np.diff(pair, prepend=-1))
-        risk_obs.ravel()[pair[starts]] = np.maximum.reduceat(p_f * result.harm_obs, starts)
-        risk_ego.ravel()[pair[starts]] = np.maximum.reduceat(p_f * result.harm_ego, starts)
+        harm_obs[part[0] : part[1]] = result.harm_obs
+        harm_ego[part[0] : part[1]] = result.harm_ego
 
     # Elementwise per triple and disjoint per chunk: any split gives the same numbers.
     workers.parallel_for(list(zip(cuts[:-1], cuts[1:], strict=True)), run)
+    return harm_obs, harm_ego
