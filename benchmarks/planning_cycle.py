@@ -122,16 +122,23 @@ def grid_config(grid: str, base: PlannerConfig | None = None) -> PlannerConfig:
 
 
 def time_call(function: Callable[[], object], repetitions: int) -> dict[str, float]:
-    """Median and 90th percentile wall time [ms] of ``function`` after one warm-up call."""
+    """Median and 90th percentile wall time [ms] of ``function`` after one warm-up call.
+
+    ``cpu_median_ms`` is the median process CPU time (all threads): on a shared machine
+    wall time also counts other jobs' time slices, CPU time does not.
+    """
     function()
     samples = []
+    cpu = []
     for _ in range(repetitions):
-        clock = time.perf_counter()
+        clock, cpu_clock = time.perf_counter(), time.process_time()
         function()
         samples.append((time.perf_counter() - clock) * 1e3)
+        cpu.append((time.process_time() - cpu_clock) * 1e3)
     samples.sort()
     return {
         "median_ms": statistics.median(samples),
+        "cpu_median_ms": statistics.median(cpu),
         "p90_ms": samples[min(len(samples) - 1, int(0.9 * len(samples)))],
     }
 
@@ -259,7 +266,7 @@ def time_peer(grid: str, n_road_users: int, repetitions: int = 20) -> dict | Non
     v0 = scene.ego.v
     path = scene.environment.reference_path
     obstacles = peer_obstacles(grid, n_road_users) if n_road_users else []
-    total = {"median_ms": 0.0, "p90_ms": 0.0, "n_trajectories": 0}
+    total = {"median_ms": 0.0, "p90_ms": 0.0, "cpu_median_ms": 0.0, "n_trajectories": 0}
     for horizon in sampling.horizons:
         try:
             timing = time_frenetix_cycle(
@@ -282,6 +289,7 @@ def time_peer(grid: str, n_road_users: int, repetitions: int = 20) -> dict | Non
             return None
         total["median_ms"] += timing["median_ms"]
         total["p90_ms"] += timing["p90_ms"]
+        total["cpu_median_ms"] += timing["cpu_median_ms"]
         total["n_trajectories"] += sampling.n_speeds * sampling.n_offsets
     return total
 
@@ -305,12 +313,17 @@ def run_benchmark(
                 "road_users": count,
                 "ours_median_ms": round(ours["median_ms"], 2),
                 "ours_p90_ms": round(ours["p90_ms"], 2),
+                "ours_cpu_ms": round(ours["cpu_median_ms"], 2),
                 "stages_ms": ours["stage_ms"],
                 "planar_median_ms": round(planar["median_ms"], 2),
                 "planar_stages_ms": planar["stage_ms"],
                 "frenetix_median_ms": None if theirs is None else round(theirs["median_ms"], 2),
+                "frenetix_cpu_ms": None if theirs is None else round(theirs["cpu_median_ms"], 2),
                 "frenetix_n_trajectories": None if theirs is None else theirs.get("n_trajectories"),
                 "speedup": None if theirs is None else round(theirs["median_ms"] / ours["median_ms"], 2),
+                "cpu_speedup": None
+                if theirs is None or not ours["cpu_median_ms"]
+                else round(theirs["cpu_median_ms"] / ours["cpu_median_ms"], 2),
             }
             rows.append(row)
     return rows
@@ -384,22 +397,26 @@ def format_table(rows: list[dict]) -> str:
     """Plain-text table of ``run_benchmark`` rows."""
     header = (
         f"{'candidates':>10} {'road users':>10} {'ours median':>12} {'ours p90':>9} "
-        f"{'planar dv':>10} {'planar/eq1':>10} {'frenetix':>9} {'frenetix/ours':>13}"
+        f"{'planar dv':>10} {'planar/eq1':>10} {'frenetix':>9} {'frenetix/ours':>13} "
+        f"{'ours CPU':>9} {'frenetix CPU':>12} {'CPU ratio':>9}"
     )
     lines = [header, "-" * len(header)]
     for r in rows:
         peer = "n/a" if r["frenetix_median_ms"] is None else f"{r['frenetix_median_ms']:.2f}"
         ratio = "n/a" if r["speedup"] is None else f"{r['speedup']:.2f}x"
         overhead = r["planar_median_ms"] / r["ours_median_ms"] if r["ours_median_ms"] else float("nan")
+        peer_cpu = "n/a" if r.get("frenetix_cpu_ms") is None else f"{r['frenetix_cpu_ms']:.2f}"
+        cpu_ratio = "n/a" if r.get("cpu_speedup") is None else f"{r['cpu_speedup']:.2f}x"
         lines.append(
             f"{r['n_trajectories']:>10} {r['road_users']:>10} {r['ours_median_ms']:>9.2f} ms "
             f"{r['ours_p90_ms']:>6.2f} ms {r['planar_median_ms']:>7.2f} ms {overhead:>9.2f}x "
-            f"{peer:>9} {ratio:>13}"
+            f"{peer:>9} {ratio:>13} {r['ours_cpu_ms']:>9.2f} {peer_cpu:>12} {cpu_ratio:>9}"
         )
     lines.append(
         "times in ms, medians over the repetitions; ours = the cycle with Eq. 1 delta-v, planar dv = "
         "the same with [risk] delta_v_model = planar_impulse; frenetix = its C++ cycle with "
-        "CalculateCollisionProbabilityFast (no harm, principles or R_max)"
+        "CalculateCollisionProbabilityFast (no harm, principles or R_max); CPU = median process CPU "
+        "time per cycle [ms], all threads (on a shared machine wall time counts other jobs too)"
     )
     for r in rows:
         peer_n = r.get("frenetix_n_trajectories")
