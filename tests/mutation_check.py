@@ -195,8 +195,8 @@ MUTANTS = (
     Mutant(
         "best_is_dearest",
         "ethical_planner/planner.py",
-        "costs.comfort + costs.mobility, costs.total, grid.levels",
-        "costs.comfort + costs.mobility, -costs.total, grid.levels",
+        "costs.comfort[rows] + costs.mobility[rows], costs.total[rows], grid.levels[rows]",
+        "costs.comfort[rows] + costs.mobility[rows], -costs.total[rows], grid.levels[rows]",
         (TEST_PLANNER,),
     ),
     # --- what a recording shows of each decision and moment

@@ -294,8 +294,13 @@ def test_best_cost_of_each_level_is_logged_and_bounds_the_chosen_plan(hidden_ped
         best = per_cycle(chunks, f"/series/best_cost/{name}")
         assert len(best) == len(probe.decisions)
         for c, decision in enumerate(probe.decisions):
-            present = np.any(np.asarray(decision.candidate_levels) == level)
-            assert np.isfinite(best[c]) == present, (name, c)
+            levels = np.asarray(decision.candidate_levels)
+            # Costed (risk assessed): the levels of the best level possible without
+            # integrals, always including the highest level present.
+            costed = level in decision.best_by_level
+            assert np.isfinite(best[c]) == costed, (name, c)
+            assert not costed or np.any(levels == level), (name, c)
+            assert int(levels.max()) in decision.best_by_level
             if decision.level == level and decision.chosen_index >= 0:
                 # The chosen plan is a candidate of its level: the best of the level is no dearer.
                 assert best[c] <= decision.costs["total"] + 1e-9
