@@ -223,8 +223,13 @@ MUTANTS = (
             ("distance_uncapped", "present & (distance < DISTANCE_CAP)", "present"),
             (
                 "visible_is_present",
-                "np.where(present, world.visible()[1:], math.nan)",
+                "np.where(present, visible, math.nan)",
                 "present.astype(float)",
+            ),
+            (
+                "hidden_ring_on_visible",
+                "np.flatnonzero(present & ~visible)",
+                "np.flatnonzero(present & visible)",
             ),
         )
     ),
