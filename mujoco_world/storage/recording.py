@@ -33,9 +33,11 @@ Entities (all in the world frame, z up, road plane z = 0):
     to the chosen one (R_max decided the cycle if > 0).
   - ``series/best_cost/<level>`` (``valid`` and the four above): the cost of the
     cheapest candidate of each level (Eq. 5 on ``valid``, Eq. 6 below; nan if the
-    level is empty) and ``world/plan/best``: their paths, one strip per level
-    present (highest level first), coloured by level and labelled with the level,
-    family, parameters and cost.
+    level is empty or was not costed: the planner assesses risk only for the best
+    level possible without integrals, ``Decision.best_by_level``) and
+    ``world/plan/best``: their paths, one strip per costed level (highest level
+    first), coloured by level and labelled with the level, family, parameters and
+    cost.
   - ``series/chosen/{horizon,end_speed,end_offset,deceleration,family}``: the
     chosen candidate's parameters [s, m/s, m, m/s^2; family: ``CandidateKind``
     value, 0 grid, 1 brake, 2 continuation, 3 emergency].
