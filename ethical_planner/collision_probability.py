@@ -201,6 +201,13 @@ def octagon_tables(
     if math.isnan(gate_sigmas) or gate_sigmas < 0.0:
         raise ValueError(f"gate_sigmas must be >= 0 (inf disables the gate), got {gate_sigmas!r}")
 
+    # Edges dropped beyond gate_sigmas whitened units, the gate's own scale (_FAR_MIN).
+    far = min(max(gate_sigmas, _FAR_MIN), _FAR_MAX)
+    if n_obs == 0 and component_weight is None:
+        # No road user: nothing to tabulate (no kernel reads a row without one).
+        empty = (np.zeros((_O_ROWS, 0)), np.zeros((_E_ROWS, 0)), np.ones((0, 1)))
+        return OctagonTables(*empty, n_traj, 0, n_t, False, far)
+
     # Per (obs, t), computed once and gathered for the survivors: whitening matrix
     # W = L^-1 = [[w11, 0], [w21, w22]] of the Cholesky factor L, closed form for 2x2.
     c11, c22 = cov[..., 0, 0], cov[..., 1, 1]
@@ -261,8 +268,6 @@ def octagon_tables(
         _E_ROWS, n_traj * n_t
     )
     degenerate = bool(n_obs) and min(ego_length, ego_width, float(olen.min()), float(owid.min())) <= 0.0
-    # Edges dropped beyond gate_sigmas whitened units, the gate's own scale (_FAR_MIN).
-    far = min(max(gate_sigmas, _FAR_MIN), _FAR_MAX)
     if component_weight is None:
         weights = np.ones((n_obs * n_t, 1))
     else:
