@@ -336,6 +336,23 @@ class Progress(Metric):
         return {"progress": run.world.ego_progress()}
 
 
+class FirstSeen(Metric):
+    """When the planner first perceived each road user (``World.first_seen``).
+
+    Value: ``first_seen`` (road user name -> time [s]); road users never perceived are
+    absent. With an unlimited sensor every road user in the world at the start is
+    seen at 0.
+    """
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``first_seen`` of the road users (entity 1..n-1)."""
+        world = run.world
+        seen = world.first_seen
+        names = world.scene.names
+        rows = np.flatnonzero(~np.isnan(seen[1:])) + 1
+        return {"first_seen": {names[i]: round(float(seen[i]), 6) for i in rows}}
+
+
 class ScriptEvents(Metric):
     """When each road user's scripted events fired (``BehaviourSpec.events``).
 
@@ -359,6 +376,7 @@ def default_metrics(config: RunConfig) -> tuple[Metric, ...]:
     return (
         RiskLog(),
         RiskByType(),
+        FirstSeen(),
         ValidityLevels(),
         PlannedCollisionProbability(),
         MinDistance(config.distance_interval),

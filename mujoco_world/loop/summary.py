@@ -110,6 +110,8 @@ class RunSummary:
             along the chosen plans.
         tracking_rms, tracking_max: ego tracking error before any contact [m].
         progress: ego arc length along its route at the end [m].
+        first_seen: when the planner first perceived each road user, by name [s]
+            (absent: never; ``SensorSpec`` limits what it perceives).
         levels: planning cycles per chosen validity level.
         timings: wall-clock seconds per part (physics, planning, measurement,
             control, total) and the real-time factor.
@@ -148,6 +150,7 @@ class RunSummary:
     tracking_rms: float = math.nan
     tracking_max: float = math.nan
     progress: float = math.nan
+    first_seen: dict[str, float] = field(default_factory=dict)
     levels: dict[str, int] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     extra_metrics: dict[str, Any] = field(default_factory=dict)

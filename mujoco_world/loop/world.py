@@ -20,9 +20,9 @@ import numpy as np
 import shapely
 
 from ethical_planner.environment import RoadEnvironment
-from ethical_planner.geometry import rectangle_corners, rectangle_overlap
+from ethical_planner.geometry import rectangle_overlap
 from ethical_planner.reference_path import ReferencePath
-from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
+from ethical_planner.road_users import KinematicState, MotionHistory, RoadUser, Shape
 from ethical_planner.validation import check_non_negative
 from mujoco_world.agents.behaviour import Fleet, WorldView
 from mujoco_world.physics.control import (
@@ -34,6 +34,7 @@ from mujoco_world.physics.control import (
 )
 from mujoco_world.physics.impact import ImpactMeasurement, ImpactRecorder
 from mujoco_world.physics.scene import BodyProxy, Scene
+from mujoco_world.physics.sight import Boxes, blocked, in_field_of_view, target_points
 from mujoco_world.scenario.recorded_tracks import RECORDED_ACCEL_CAP, RecordedTracks
 from mujoco_world.scenario.road import StaticBox, box_footprint, build_road, debris_boxes
 from mujoco_world.scenario.spec import BehaviourKind, Boundary, RoadKind, RoadName, RouteSpec, Scenario
@@ -166,6 +167,7 @@ class World:
                 *u.shape,
                 u.body_mass,
                 kerbs=False if is_recorded or (on_map and u.behaviour.kind is BehaviourKind.PARKED) else None,
+                height=u.body_height,
             )
             for u, is_recorded in zip(users, recorded, strict=True)
         ]
@@ -251,8 +253,12 @@ class World:
         self._dist_buf = np.zeros(6)
         # Geoms of road users, for distance queries from the ego.
         self._other_geoms = self.scene.geom_ids[1:]
-        self._occluders = np.array([t not in VULNERABLE_TYPES for t in self.types])
-        self._occluders[0] = False
+        self.heights = np.array([p.height for p in proxies])
+        #: Static boxes as sight sees them (walls, kerbs, debris, fixed obstacles).
+        self._static_sight = Boxes.from_static(statics)
+        #: Time each road user was first perceived by the planner [s] (nan: not yet), (n,).
+        self.first_seen = np.full(self.n, math.nan)
+        self.first_seen[0] = 0.0
         #: Wall-clock seconds spent in mj_step, in controllers and behaviours, in measurement.
         self.timing = {"mj_step": 0.0, "control": 0.0, "measurement": 0.0}
         self.control_interval = int(control_interval)
@@ -464,7 +470,8 @@ class World:
         the physics' angular velocity. Hidden road users (sensor range, occlusion) are
         left out. Each road user carries its ``history``: the world's samples of its true
         motion every ``history_step`` (a tracker's smoothed estimate; the observation
-        noise applies to the current state only).
+        noise applies to the current state only). The first time a road user is
+        perceived is kept in ``first_seen``.
 
         Returns:
             (ego state, road users with ids = entity indices, shapes, masses and legal
@@ -489,7 +496,8 @@ class World:
                 accel[1:] += rng.normal(0.0, noise.acceleration, self.n - 1)
                 yaw_rate[1:] += rng.normal(0.0, noise.yaw_rate, self.n - 1)
         t = self.time
-        visible = self.visible() & self.present
+        visible = self.visible()
+        self.first_seen[visible & np.isnan(self.first_seen)] = t
         a_plan = float(self.ego_plan.sample(t)[2] @ np.array([math.cos(yaw[0]), math.sin(yaw[0])]))
         ego_state = KinematicState(
             float(x[0]), float(y[0]), float(yaw[0]), float(v[0]), a_plan, float(qvel[0, 2])
@@ -534,25 +542,72 @@ class World:
         return dv[:, 0] * np.cos(yaw) + dv[:, 1] * np.sin(yaw)
 
     def visible(self) -> np.ndarray:
-        """(n,) bool: which bodies the ego perceives (entity 0, the ego, is always True).
+        """(n,) bool: which bodies the ego's sensor perceives (the ego itself always).
 
-        Applies the scenario's sensor range and, if enabled, occlusion: a road user is
-        hidden when the lines of sight from the ego's centre to its centre and to all
-        four corners pass through another vehicle's footprint (pedestrians and
-        cyclists do not occlude).
+        Bodies out of the world are never perceived. With a limited sensor
+        (``SensorSpec``: range, field of view, occlusion) a road user is perceived if one
+        of its five sample points (centre, corners) is in range, in the field of view
+        and, with occlusion, no other body of any type and no static box (wall, kerb,
+        debris, fixed obstacle) rises above the sight line from the sensor to the point
+        at half the road user's height (``physics.sight``).
         """
         sensor = self.scenario.sensor
-        visible = np.ones(self.n, dtype=bool)
-        if self.n == 1 or (sensor.range is None and not sensor.occlusion):
-            return visible
-        pos = self.scene.qpos[:, :2]
-        eye = pos[0]
-        if sensor.range is not None:
-            visible &= np.hypot(*(pos - eye).T) <= sensor.range
-        if sensor.occlusion:
-            visible[1:] &= ~_occluded(eye, self.scene.qpos, self.lengths, self.widths, self._occluders)
+        visible = self.present.copy()
         visible[0] = True
+        others = np.flatnonzero(visible[1:]) + 1
+        if not sensor.limited or others.size == 0:
+            return visible
+        qpos = self.scene.qpos
+        heading = float(qpos[0, 2])
+        eye = qpos[0, :2] + sensor.offset * np.array([math.cos(heading), math.sin(heading)])
+        px, py = target_points(
+            qpos[others, 0], qpos[others, 1], qpos[others, 2], self.lengths[others], self.widths[others]
+        )
+        seen = in_field_of_view(eye, heading, px, py, sensor.range, sensor.fov)
+        if sensor.occlusion:
+            look = seen.any(axis=1)
+            if look.any():
+                rows = others[look]
+                boxes, ignore = self._sight_boxes(eye, rows, px[look], py[look])
+                seen[look] &= ~blocked(
+                    eye, sensor.height, px[look], py[look], 0.5 * self.heights[rows], boxes, ignore
+                )
+        visible[others] = seen.any(axis=1)
         return visible
+
+    def _sight_boxes(
+        self, eye: np.ndarray, rows: np.ndarray, px: np.ndarray, py: np.ndarray
+    ) -> tuple[Boxes, np.ndarray]:
+        """Boxes that may hide road users ``rows`` from ``eye``, and which to ignore for whom.
+
+        Returns:
+            (boxes: the other road users in the world, then the static boxes near enough
+            and tall enough to cross a sight line; ignore: (len(rows), k) bool, a road
+            user's own body).
+        """
+        qpos = self.scene.qpos
+        bodies = np.flatnonzero(self.present)
+        bodies = bodies[bodies != 0]
+        moving = Boxes(
+            qpos[bodies, 0],
+            qpos[bodies, 1],
+            qpos[bodies, 2],
+            0.5 * self.lengths[bodies],
+            0.5 * self.widths[bodies],
+            self.heights[bodies],
+        )
+        static = self._static_sight
+        if static.size:
+            # A box lower than the sensor and every target's middle is under every sight
+            # line; one farther than every target point cannot be crossed.
+            lowest = min(self.scenario.sensor.height, 0.5 * float(self.heights[rows].min()))
+            reach = float(np.hypot(px - eye[0], py - eye[1]).max())
+            radius = np.hypot(static.half_length, static.half_width)
+            near = np.hypot(static.x - eye[0], static.y - eye[1]) - radius
+            static = static.take((static.height > lowest) & (near <= reach))
+        ignore = np.zeros((len(rows), bodies.size + static.size), dtype=bool)
+        ignore[:, : bodies.size] = rows[:, None] == bodies[None, :]
+        return Boxes.concatenate(moving, static), ignore
 
     # ------------------------------------------------------------------ stepping
 
@@ -826,49 +881,3 @@ def _check_step_size(scenario: Scenario, proxies: Sequence[BodyProxy], timestep:
                 f"physics step, more than {MAX_STEP_FRACTION:.0%} of its size {size:g} m; lower the "
                 "speed or the physics time step"
             )
-
-
-def _occluded(
-    eye: np.ndarray, qpos: np.ndarray, length: np.ndarray, width: np.ndarray, occluders: np.ndarray
-) -> np.ndarray:
-    """(n - 1,) bool: bodies 1..n-1 fully hidden from ``eye`` by occluder footprints.
-
-    Vectorised slab test of every sight line (eye to a target's centre and corners)
-    against every occluder rectangle (in the rectangle's own frame).
-    """
-    n = len(qpos)
-    c, s = np.cos(qpos[:, 2]), np.sin(qpos[:, 2])
-    hl, hw = 0.5 * length, 0.5 * width
-    # Target points: centre and 4 corners (10 % inside) of bodies 1..n-1, shape (n-1, 5) each.
-    cx, cy = rectangle_corners(qpos[1:, 0], qpos[1:, 1], qpos[1:, 2], 0.9 * length[1:], 0.9 * width[1:])
-    px = np.concatenate([qpos[1:, 0, None], cx], axis=1)
-    py = np.concatenate([qpos[1:, 1, None], cy], axis=1)
-    idx = np.flatnonzero(occluders)
-    if idx.size == 0:
-        return np.zeros(n - 1, dtype=bool)
-    # Segment eye -> point in each occluder's frame: (n-1, 5, k).
-    ox, oy = qpos[idx, 0], qpos[idx, 1]
-    oc, os_ = c[idx], s[idx]
-    ex, ey = eye[0] - ox, eye[1] - oy
-    a_x = ex * oc + ey * os_
-    a_y = -ex * os_ + ey * oc
-    dx = px[..., None] - ox
-    dy = py[..., None] - oy
-    b_x = dx * oc + dy * os_
-    b_y = -dx * os_ + dy * oc
-    t0 = np.zeros(b_x.shape)
-    t1 = np.ones(b_x.shape)
-    for a, b, half in ((a_x, b_x, hl[idx]), (a_y, b_y, hw[idx])):
-        d = b - a
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lo = (-half - a) / d
-            hi = (half - a) / d
-        near = np.where(d != 0, np.minimum(lo, hi), np.where(np.abs(a) <= half, -np.inf, np.inf))
-        far = np.where(d != 0, np.maximum(lo, hi), np.where(np.abs(a) <= half, np.inf, -np.inf))
-        t0 = np.maximum(t0, near)
-        t1 = np.minimum(t1, far)
-    blocked = t0 < t1  # the sight line crosses the rectangle
-    # A body never occludes itself.
-    own = idx[None, None, :] == np.arange(1, n)[:, None, None]
-    blocked &= ~own
-    return blocked.any(axis=2).all(axis=1)

@@ -71,6 +71,8 @@ class BodyProxy:
         mass: [kg].
         kerbs: whether kerbs stop it; None: motor vehicles only (a body that follows a
             recording ignores kerbs: the recording already says where it went).
+        height: [m]; None: the type's (``PROXY_HEIGHT_M``). The world is planar: the
+            height is for pictures, capsule lengths and sight (``physics.sight``).
     """
 
     name: str
@@ -79,6 +81,7 @@ class BodyProxy:
     width: float
     mass: float
     kerbs: bool | None = None
+    height: float | None = None
 
     def __post_init__(self) -> None:
         check(
@@ -89,6 +92,9 @@ class BodyProxy:
         check_positive("BodyProxy", length=self.length, width=self.width, mass=self.mass)
         if self.kerbs is None:
             object.__setattr__(self, "kerbs", self.type in MOTORISED_TYPES)
+        if self.height is None:
+            object.__setattr__(self, "height", PROXY_HEIGHT_M[self.type])
+        check_positive("BodyProxy", height=self.height)
 
     @classmethod
     def of_type(
@@ -99,19 +105,15 @@ class BodyProxy:
         width: float | None = None,
         mass: float | None = None,
         kerbs: bool | None = None,
+        height: float | None = None,
     ) -> BodyProxy:
-        """A proxy with the type's default shape and SPEC mass unless given."""
+        """A proxy with the type's default shape, height and SPEC mass unless given."""
         kind = RoadUserType.parse(kind)
         shape = DEFAULT_SHAPES[kind]
         length = shape.length if length is None else length
         width = shape.width if width is None else width
         mass = mass_of(kind, length, width) if mass is None else mass
-        return cls(name, kind, float(length), float(width), float(mass), kerbs)
-
-    @property
-    def height(self) -> float:
-        """Body height [m]."""
-        return PROXY_HEIGHT_M[self.type]
+        return cls(name, kind, float(length), float(width), float(mass), kerbs, height)
 
     @property
     def is_round(self) -> bool:

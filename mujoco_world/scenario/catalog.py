@@ -13,6 +13,7 @@ intersection the main road runs from x = -length/2 and the cross road along +y.
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -620,6 +621,35 @@ def cut_in_and_brake(rng: np.random.Generator | None = None) -> Scenario:
     )
 
 
+def stopped_car_behind_curve(rng: np.random.Generator | None = None) -> Scenario:
+    """A car stands in the ego lane behind a left curve between walls that hide it."""
+    draw = _Draw(rng)
+    radius = draw(40.0, 35.0, 55.0)
+    angle = draw(90.0, 70.0, 110.0)
+    road = RoadSpec(
+        kind="curved",
+        length=220.0,
+        radius=radius,
+        curve_angle=angle,
+        lead_in=40.0,
+        speed_limit=13.9,
+        boundary="wall",
+    )
+    # Three quarters into the arc: the inner wall hides it until the ego is ~40 m away.
+    s_car = 40.0 + 0.75 * math.radians(angle) * radius
+    stopped = _user("stopped", "car", RouteSpec(lane=0), s_car, _scripted(0.0))
+    return Scenario(
+        name="stopped_car_behind_curve",
+        description="a car stands in the ego lane behind a left curve; 1 m walls hide it (occlusion)",
+        road=road,
+        sensor=SensorSpec(occlusion=True),
+        ego=EgoSpec(s0=5.0, speed=draw(12.5, 11.0, 13.9), goal_s=200.0),
+        road_users=(stopped,),
+        duration=25.0,
+        expect=ExpectSpec(ego_collision=False),
+    )
+
+
 # --------------------------------------------------------------------------- registry
 
 
@@ -651,6 +681,7 @@ _FAMILIES = (
     child_between_parked,
     debris_on_lane,
     cut_in_and_brake,
+    stopped_car_behind_curve,
 )
 
 #: Name -> family, in catalog order.

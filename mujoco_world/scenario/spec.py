@@ -104,6 +104,9 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "contact.friction": (0.0, 2.0, "-"),
     "restitution.speed_scale": (0.1, 100.0, "m/s"),
     "sensor.range": (1.0, 2000.0, "m"),
+    "sensor.fov": (1.0, 360.0, "deg"),
+    "sensor.height": (0.1, 5.0, "m"),
+    "sensor.offset": (-15.0, 15.0, "m"),
     "debris.s": (0.0, 20000.0, "m"),
     "debris.offset": (-20.0, 20.0, "m"),
     "debris.length": (0.1, 20.0, "m"),
@@ -663,10 +666,11 @@ class LegalSpec:
 
 #: Road-user kinds a scenario may name beyond ``RoadUserType``: name -> (the type the
 #: planner, the physics and the harm model see, default (length, width) [m], default
-#: mass [kg]). A child is a pedestrian for the CRSS harm model (the model has no age
-#: term); only its body is smaller and lighter (a 6-7 year old: 23 kg, 0.3 m wide).
-SCENARIO_KINDS: dict[str, tuple[RoadUserType, tuple[float, float], float]] = {
-    "child": (RoadUserType.PEDESTRIAN, (0.3, 0.3), 23.0),
+#: mass [kg], height [m]). A child is a pedestrian for the CRSS harm model (the model
+#: has no age term); only its body is smaller, lighter and lower (a 6-7 year old: 23 kg,
+#: 0.3 m wide, 1.2 m tall; the height matters for sight, ``physics.sight``).
+SCENARIO_KINDS: dict[str, tuple[RoadUserType, tuple[float, float], float, float]] = {
+    "child": (RoadUserType.PEDESTRIAN, (0.3, 0.3), 23.0, 1.2),
 }
 
 
@@ -749,6 +753,11 @@ class RoadUserSpec:
         if self.mass is not None:
             return self.mass
         return SCENARIO_KINDS[self.kind][2] if self.kind is not None else None
+
+    @property
+    def body_height(self) -> float | None:
+        """The kind's height [m], else None (the type's height)."""
+        return SCENARIO_KINDS[self.kind][3] if self.kind is not None else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -978,24 +987,42 @@ class ContactSpec:
 
 @dataclass(frozen=True, slots=True)
 class SensorSpec:
-    """What the ego can perceive.
+    """What the ego can perceive (``physics.sight``).
+
+    A road user is perceived if one of its five sample points (centre, corners) is
+    within ``range``, within the field of view and, with ``occlusion``, not hidden
+    behind any body or static box (road users of every type, walls, kerbs, debris, fixed
+    obstacles) that rises above the sight line from the sensor to the point at half the
+    road user's height.
 
     Attributes:
-        occlusion: hide road users whose centre and corners are all behind other
-            vehicles (as seen from the ego's centre).
-        range: perception range [m] around the ego's centre, or None for unlimited.
+        occlusion: bodies and static boxes hide what is behind them.
+        range: perception range [m] around the sensor, or None for unlimited.
+        fov: full opening angle of the field of view [deg], centred on the ego's
+            heading (360: all around).
+        height: sensor height above the road [m] (a roof camera: 1.2 m).
+        offset: sensor position ahead of the ego's centre along its heading [m].
     """
 
     occlusion: bool = False
     range: float | None = None
+    fov: float = 360.0
+    height: float = 1.2
+    offset: float = 0.0
 
     def __post_init__(self) -> None:
         check(
             isinstance(self.occlusion, bool),
             f"sensor.occlusion must be true or false, got {self.occlusion!r}",
         )
-        check_positive("sensor", range=self.range)
+        check_positive("sensor", range=self.range, fov=self.fov, height=self.height)
+        check_finite("sensor", offset=self.offset)
         check_plausible("sensor", self)
+
+    @property
+    def limited(self) -> bool:
+        """True if the sensor misses anything (range, field of view or occlusion)."""
+        return self.occlusion or self.range is not None or self.fov < 360.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -54,6 +54,8 @@ Entities (all in the world frame, z up, road plane z = 0):
   road user with no value in a flush interval is not written for that interval.
 * ``world/impacts/<n>/{point,force}`` and ``impacts/<n>/<body>/{dv_measured,
   dv_predicted,harm_measured,harm_predicted}``, plus an ``impacts`` TextLog.
+* ``sight`` (TextLog): a road user's name and type the moment the planner first
+  perceives it (``World.first_seen``; sensor range, field of view, occlusion).
 
 The default blueprint shows a top-down view that follows the ego
 (``EyeControls3D.tracking_entity = world/ego`` at ``RecorderConfig.follow_height``;
@@ -327,6 +329,7 @@ class RerunRecorder(RunObserver):
         self._hidden_shown = False
         self._rng = np.random.default_rng(0)  # candidate subsampling only, fixed for reproducibility
         self._closed = False
+        self._seen = np.zeros(0, dtype=bool)  # road users logged as first seen
 
     # ------------------------------------------------------------------ hooks
 
@@ -341,6 +344,7 @@ class RerunRecorder(RunObserver):
         self._world_static(world, scenario, planner, seed)
         self._bodies = _BodyLayout(world)
         self._extent = footprint_extents(world)
+        self._seen = np.zeros(world.n, dtype=bool)
         self._log_body_shapes()
         rec.set_time("sim_time", duration=world.time)
         self._log_bodies(world)
@@ -355,6 +359,7 @@ class RerunRecorder(RunObserver):
         self.rec.set_time("sim_time", duration=time)
         self._log_bodies(world)
         self._log_state_series(world, time)
+        self._log_first_seen(world)
         if time >= self._next_flush:
             self._flush()
             self._next_flush = time + self.config.flush_interval
@@ -662,6 +667,22 @@ class RerunRecorder(RunObserver):
                 ),
                 static=True,
             )
+
+    def _log_first_seen(self, world: World) -> None:
+        """A ``sight`` entry, at its time, for each road user first perceived since the last frame."""
+        seen = ~np.isnan(world.first_seen)
+        seen[0] = False
+        new = np.flatnonzero(seen & ~self._seen)
+        if new.size == 0:
+            return
+        self._seen[new] = True
+        rec = self._stream()
+        for i in new:
+            t = float(world.first_seen[i])
+            rec.set_time("sim_time", duration=t)
+            who = f"{world.scene.names[i]} ({world.types[i].value})"
+            rec.log("sight", rr.TextLog(f"first seen at {t:.2f} s: {who}"))
+        rec.set_time("sim_time", duration=world.time)
 
     def _log_bodies(self, world: World) -> None:
         rec = self._stream()
