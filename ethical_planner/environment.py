@@ -12,6 +12,30 @@ from shapely.geometry import LineString, Polygon
 from ethical_planner.reference_path import ReferencePath
 
 
+@dataclass(frozen=True, slots=True)
+class StopLine:
+    """A stop line on the reference path: a traffic light's or a stop sign's.
+
+    Environment data for the planner (the scenario's ``[[stop_lines]]``); the world
+    judges the ego's violations itself. The planner does not read it yet: whether a
+    candidate crossing a red line is invalid or costed is the planner's decision.
+
+    Attributes:
+        s: arc length along the reference path [m].
+        red: (start, end) times [s] of the run in which the light is red; empty for a
+            stop sign.
+        stop: a stop sign (stand still before crossing).
+    """
+
+    s: float
+    red: tuple[tuple[float, float], ...] = ()
+    stop: bool = False
+
+    def red_at(self, time: float) -> bool:
+        """True if the light is red at ``time`` [s]."""
+        return any(a <= time < b for a, b in self.red)
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class RoadEnvironment:
     """Road geometry around the ego's route.
@@ -23,6 +47,7 @@ class RoadEnvironment:
         lane_width: [m].
         lane_offsets: lateral offsets d of the lane centres from the reference path [m].
         speed_limit: [m/s].
+        stop_lines: traffic lights and stop signs on the reference path, by arc length.
     """
 
     reference_path: ReferencePath
@@ -30,6 +55,7 @@ class RoadEnvironment:
     lane_width: float = 3.5
     lane_offsets: tuple[float, ...] = (0.0,)
     speed_limit: float = 13.9
+    stop_lines: tuple[StopLine, ...] = ()
     _prepared: bool = field(default=False, repr=False)
 
     def __post_init__(self) -> None:
