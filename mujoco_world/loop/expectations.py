@@ -63,6 +63,11 @@ for _name, _item in {
     ),
     "min_ttc": Expectation(lambda s: s.min_ttc, ">=", "ego time-to-collision [s], at least"),
     "min_progress": Expectation(lambda s: s.progress, ">=", "ego arc length along its route [m], at least"),
+    "max_rule_violations": Expectation(
+        lambda s: len(s.rule_violations),
+        "<=",
+        "ego traffic-rule violations, at most",
+    ),
 }.items():
     EXPECTATIONS.register(_name, _item)
 

@@ -26,9 +26,10 @@ from mujoco_world.agents.ego_planner import Plan
 from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.state import RunState
-from mujoco_world.loop.summary import GROUPS
+from mujoco_world.loop.summary import GROUPS, RuleViolation
 from mujoco_world.loop.world import World
 from mujoco_world.physics.safety import time_to_collision
+from mujoco_world.scenario.spec import STANDSTILL_MPS
 
 #: Number of highest risk values kept per group (paper Fig. 5 uses 100).
 TOP_RISKS = 100
@@ -353,6 +354,55 @@ class FirstSeen(Metric):
         return {"first_seen": {names[i]: round(float(seen[i]), 6) for i in rows}}
 
 
+class RuleViolations(Metric):
+    """The ego's traffic-rule violations at the scenario's stop lines (``StopLineSpec``).
+
+    Every ``interval`` physics steps the ego's front arc length (``World.ego_progress``
+    + half its length) is compared with each line: crossing it while the light is red
+    is a ``red_light`` violation; crossing a stop sign's line without having stood still
+    (speed below ``STANDSTILL_MPS``) while its front was within ``stop_zone`` before the
+    line is a ``stop_sign`` violation. A line is judged once, when first crossed.
+
+    Value: ``rule_violations`` (``RuleViolation`` records, in time order).
+    """
+
+    def __init__(self, interval: int = 10) -> None:
+        self.interval = interval
+
+    def start(self, run: RunState) -> None:
+        """Nothing crossed, no standstill yet."""
+        lines = run.scenario.stop_lines
+        self.lines = lines
+        self.red = [line.as_stop_line() for line in lines]
+        self.s = np.array([line.s for line in lines])
+        self.zone = np.array([line.stop_zone for line in lines])
+        self.crossed = np.zeros(len(lines), dtype=bool)
+        self.stood = np.zeros(len(lines), dtype=bool)
+        self.found: list[RuleViolation] = []
+
+    def sample(self, run: RunState) -> None:
+        """Judge the lines the ego's front has just crossed."""
+        if not self.lines:
+            return
+        world = run.world
+        front = world.ego_progress() + 0.5 * float(world.lengths[0])
+        speed = float(world.scene.speeds()[0])
+        near = ~self.crossed & (front >= self.s - self.zone)
+        self.stood |= near & (speed < STANDSTILL_MPS)
+        t = world.time
+        for k in np.flatnonzero(~self.crossed & (front >= self.s)):
+            self.crossed[k] = True
+            line = self.lines[k]
+            if line.stop and not self.stood[k]:
+                self.found.append(RuleViolation("stop_sign", line.name, round(t, 6), speed))
+            elif self.red[k].red_at(t):
+                self.found.append(RuleViolation("red_light", line.name, round(t, 6), speed))
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``rule_violations``."""
+        return {"rule_violations": tuple(self.found)}
+
+
 class ScriptEvents(Metric):
     """When each road user's scripted events fired (``BehaviourSpec.events``).
 
@@ -384,5 +434,6 @@ def default_metrics(config: RunConfig) -> tuple[Metric, ...]:
         HarmPerGroup(),
         TrackingError(),
         Progress(),
+        RuleViolations(),
         ScriptEvents(),
     )

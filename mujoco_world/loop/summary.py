@@ -78,6 +78,24 @@ class ExpectationResult:
 
 
 @dataclass(frozen=True, slots=True)
+class RuleViolation:
+    """A traffic rule the ego broke (``scenario.spec.StopLineSpec``).
+
+    Attributes:
+        rule: ``red_light`` (crossed a stop line on red) or ``stop_sign`` (crossed a stop
+            sign's line without standing still before it).
+        line: the stop line's name.
+        time: when the ego's front crossed the line [s].
+        speed: the ego's speed then [m/s].
+    """
+
+    rule: str
+    line: str
+    time: float
+    speed: float
+
+
+@dataclass(frozen=True, slots=True)
 class RunSummary:
     """Result of one closed-loop run.
 
@@ -112,6 +130,7 @@ class RunSummary:
         progress: ego arc length along its route at the end [m].
         first_seen: when the planner first perceived each road user, by name [s]
             (absent: never; ``SensorSpec`` limits what it perceives).
+        rule_violations: the ego's traffic-rule violations, in time order.
         levels: planning cycles per chosen validity level.
         timings: wall-clock seconds per part (physics, planning, measurement,
             control, total) and the real-time factor.
@@ -151,6 +170,7 @@ class RunSummary:
     tracking_max: float = math.nan
     progress: float = math.nan
     first_seen: dict[str, float] = field(default_factory=dict)
+    rule_violations: tuple[RuleViolation, ...] = ()
     levels: dict[str, int] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     extra_metrics: dict[str, Any] = field(default_factory=dict)

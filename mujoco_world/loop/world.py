@@ -345,7 +345,7 @@ class World:
         return self.scene.names[entity] if entity >= 0 else f"a {self.scene.static_kind}"
 
     def environment(self) -> RoadEnvironment:
-        """The road as the planner sees it: the ego route, lanes, drivable area (minus debris)."""
+        """The road as the planner sees it: the ego route, lanes, drivable area (minus debris), stop lines."""
         spec = self.scenario.road
         if spec.map is not None:
             width, offsets = spec.map.lane_width, spec.map.lane_offsets
@@ -363,6 +363,7 @@ class World:
             lane_width=width,
             lane_offsets=offsets,
             speed_limit=spec.speed_limit,
+            stop_lines=tuple(line.as_stop_line() for line in self.scenario.stop_lines),
         )
 
     # ------------------------------------------------------------------ state

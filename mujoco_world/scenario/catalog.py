@@ -36,6 +36,7 @@ from mujoco_world.scenario.spec import (
     RouteSpec,
     Scenario,
     SensorSpec,
+    StopLineSpec,
 )
 
 
@@ -650,6 +651,29 @@ def stopped_car_behind_curve(rng: np.random.Generator | None = None) -> Scenario
     )
 
 
+def red_light_for_ego(rng: np.random.Generator | None = None) -> Scenario:
+    """The ego's light is red for 9 s while cross traffic has green; then it turns green."""
+    draw = _Draw(rng)
+    road = RoadSpec(kind="intersection", length=160.0, speed_limit=13.9)
+    half = 0.5 * road.length
+    red = ((0.0, draw(9.0, 7.0, 11.0)),)
+    line = StopLineSpec("light", s=half - road.half_width - road.shoulder - 2.0, red=red)
+    cross_speed = draw(12.0, 10.0, 13.9)
+    # The cross car reaches the ego's lane about 6 s after the start (on its green).
+    cross = RouteSpec(road="cross", lane=0)
+    crossing = _user("crossing", "car", cross, half - 6.0 * cross_speed, _scripted(cross_speed))
+    return Scenario(
+        name="red_light_for_ego",
+        description="the ego's light is red for 9 s; a car crosses on its green meanwhile",
+        road=road,
+        ego=EgoSpec(s0=10.0, speed=draw(12.0, 10.0, 13.9), goal_s=150.0),
+        road_users=(crossing,),
+        stop_lines=(line,),
+        duration=25.0,
+        expect=ExpectSpec(max_rule_violations=0, ego_collision=False, reach_goal=True),
+    )
+
+
 # --------------------------------------------------------------------------- registry
 
 
@@ -682,6 +706,7 @@ _FAMILIES = (
     debris_on_lane,
     cut_in_and_brake,
     stopped_car_behind_curve,
+    red_light_for_ego,
 )
 
 #: Name -> family, in catalog order.

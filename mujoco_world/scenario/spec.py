@@ -18,6 +18,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
+from ethical_planner.environment import StopLine
 from ethical_planner.impulse import RestitutionLaw
 from ethical_planner.records import errors_in, from_mapping, read_toml
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, RoadUserType
@@ -108,6 +109,8 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "sensor.height": (0.1, 5.0, "m"),
     "sensor.offset": (-15.0, 15.0, "m"),
     "debris.s": (0.0, 20000.0, "m"),
+    "stop_line.s": (0.0, 20000.0, "m"),
+    "stop_line.stop_zone": (0.5, 100.0, "m"),
     "debris.offset": (-20.0, 20.0, "m"),
     "debris.length": (0.1, 20.0, "m"),
     "debris.width": (0.1, 10.0, "m"),
@@ -1062,6 +1065,69 @@ class DebrisSpec:
 
 
 @dataclass(frozen=True, slots=True)
+class StopLineSpec:
+    """A stop line on the ego's route: a traffic light's, or a stop sign's.
+
+    The world checks the ego against it (``loop.metrics.RuleViolations``): crossing the
+    line (the ego's front passing ``s``) while the light is red is a ``red_light``
+    violation; crossing a stop sign's line without having stood still (below
+    ``STANDSTILL_MPS``) within ``stop_zone`` before it is a ``stop_sign`` violation. The
+    planner receives the line as environment data (``RoadEnvironment.stop_lines``).
+
+    Attributes:
+        name: identifier (unique among stop lines).
+        s: arc length of the line along the ego's route [m].
+        red: time windows [s] (start, end) in which the light is red (amber counts as
+            red); empty for a stop sign.
+        stop: a stop sign: the ego must stand still before crossing.
+        stop_zone: how far before the line the standstill counts [m] (stop signs).
+    """
+
+    name: str
+    s: float
+    red: tuple[tuple[float, float], ...] = ()
+    stop: bool = False
+    stop_zone: float = 10.0
+
+    def __post_init__(self) -> None:
+        check(
+            isinstance(self.name, str) and self.name.isidentifier(),
+            f"stop line name must be an identifier (letters, digits, _), got {self.name!r}",
+        )
+        check_finite("stop_line", s=self.s)
+        check_positive("stop_line", stop_zone=self.stop_zone)
+        check(isinstance(self.stop, bool), f"stop_line.stop must be true or false, got {self.stop!r}")
+        try:
+            red = tuple((float(a), float(b)) for a, b in self.red)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"stop_line.red must be a list of [start, end] times [s], got {self.red!r:.80}"
+            ) from None
+        check(
+            all(math.isfinite(a) and math.isfinite(b) and 0.0 <= a < b for a, b in red),
+            f"stop_line.red: each window needs 0 <= start < end [s], got {red}",
+        )
+        check(
+            all(b1 <= a2 for (_, b1), (a2, _) in zip(red, red[1:], strict=False)),
+            f"stop_line.red: windows must be in order and not overlap, got {red}",
+        )
+        check(
+            bool(red) != self.stop,
+            "stop_line: give red windows (a traffic light) or stop = true (a stop sign), not both",
+        )
+        object.__setattr__(self, "red", red)
+        check_plausible("stop_line", self)
+
+    def as_stop_line(self) -> StopLine:
+        """The line as the planner's environment data."""
+        return StopLine(self.s, self.red, self.stop)
+
+
+#: Speed below which the ego stands still at a stop sign [m/s].
+STANDSTILL_MPS = 0.1
+
+
+@dataclass(frozen=True, slots=True)
 class ExpectSpec:
     """What a scenario expects of a run: each given item is checked and reported pass/fail.
 
@@ -1080,6 +1146,8 @@ class ExpectSpec:
         min_distance_vulnerable: the same to vulnerable road users [m].
         min_ttc: the ego's time-to-collision stays at least this long [s].
         min_progress: the ego gets at least this far along its route [m].
+        max_rule_violations: at most this many traffic-rule violations of the ego
+            (red lights, stop signs: ``StopLineSpec``).
     """
 
     outcome: str | tuple[str, ...] = ()
@@ -1094,6 +1162,7 @@ class ExpectSpec:
     min_distance_vulnerable: float | None = None
     min_ttc: float | None = None
     min_progress: float | None = None
+    max_rule_violations: int | None = None
 
     def __post_init__(self) -> None:
         outcome = (self.outcome,) if isinstance(self.outcome, str) else tuple(self.outcome)
@@ -1106,12 +1175,12 @@ class ExpectSpec:
                 value is None or isinstance(value, bool),
                 f"expect.{name} must be true or false, got {value!r}",
             )
-        check(
-            self.max_collisions is None
-            or (isinstance(self.max_collisions, int) and not isinstance(self.max_collisions, bool))
-            and self.max_collisions >= 0,
-            f"expect.max_collisions must be an integer >= 0, got {self.max_collisions!r}",
-        )
+        for name in ("max_collisions", "max_rule_violations"):
+            value = getattr(self, name)
+            check(
+                value is None or (isinstance(value, int) and not isinstance(value, bool)) and value >= 0,
+                f"expect.{name} must be an integer >= 0, got {value!r}",
+            )
         check_finite(
             "expect",
             max_ego_harm=self.max_ego_harm,
@@ -1149,6 +1218,7 @@ class Scenario:
         notes: what made the scenario (an importer's decisions and findings), for
             summaries and reports.
         debris: static obstacles placed along the road (the planner perceives them).
+        stop_lines: traffic lights and stop signs on the ego's route (``StopLineSpec``).
         expect: what a run should give (checked and reported pass/fail), or None.
     """
 
@@ -1163,6 +1233,7 @@ class Scenario:
     obstacles: tuple[ObstacleSpec, ...] = ()
     notes: tuple[str, ...] = ()
     debris: tuple[DebrisSpec, ...] = ()
+    stop_lines: tuple[StopLineSpec, ...] = ()
     expect: ExpectSpec | None = None
 
     def __post_init__(self) -> None:
@@ -1211,6 +1282,10 @@ class Scenario:
                 )
         object.__setattr__(self, "debris", tuple(self.debris))
         self._check_debris()
+        object.__setattr__(self, "stop_lines", tuple(self.stop_lines))
+        lines = [line.name for line in self.stop_lines]
+        twice = sorted({n for n in lines if lines.count(n) > 1})
+        check(not twice, f"stop_lines: duplicate names {twice}")
         lanes = self.road.lanes
         check(self.ego.lane < lanes, f"ego.lane must be < road.lanes ({lanes}), got {self.ego.lane}")
         if self.road.kind is not RoadKind.INTERSECTION:
