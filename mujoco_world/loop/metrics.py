@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Sequence
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -286,34 +287,60 @@ class TimeToCollision(Metric):
         return {"min_ttc": self.lowest}
 
 
+def combined_harm(records: Sequence[ImpactRecord]) -> dict[str, float]:
+    """Expected number of MAIS3+ injured per group over measured collisions.
+
+    A body hit several times is injured (MAIS3+) unless every impact spares it, so its
+    harms combine as ``1 - prod(1 - h_i)`` (the impacts taken as independent), never
+    above 1; a group's value is the sum of its bodies' combined harms: an expected count
+    of MAIS3+ injured, not a probability (it can exceed 1 with several bodies). Walls
+    and debris have no harm (nan) and are left out; harms are clipped to [0, 1].
+
+    Args:
+        records: the collisions.
+
+    Returns:
+        group -> expected count, for every group of ``GROUPS``.
+    """
+    spared: dict[int, float] = {}
+    group: dict[int, str] = {}
+    for record in records:
+        for impact, body in ((record.measurement.a, record.a), (record.measurement.b, record.b)):
+            if body.group in GROUPS and math.isfinite(body.harm_measured):
+                h = min(max(body.harm_measured, 0.0), 1.0)
+                spared[impact.entity] = spared.get(impact.entity, 1.0) * (1.0 - h)
+                group[impact.entity] = body.group
+    out = {g: 0.0 for g in GROUPS}
+    for entity, p in spared.items():
+        out[group[entity]] += 1.0 - p
+    return out
+
+
 class HarmPerGroup(Metric):
-    """Measured harm summed per group (ego, third_party, vulnerable) over the collisions.
+    """Measured harm per group (ego, third_party, vulnerable) over the collisions.
 
     Values: ``harm`` (all collisions), ``harm_ego_involved`` (collisions the ego took
     part in: what the ego's planner answers for) and ``harm_third_party`` (collisions
-    between other road users). Walls have no harm (nan) and are left out.
+    between other road users), each ``combined_harm``: per body the repeated impacts
+    combine as ``1 - prod(1 - h_i)``, per group the bodies add up (an expected count of
+    MAIS3+ injured). A body hit in both kinds of collision counts in both splits, so
+    ``harm`` may be less than their sum.
     """
 
     def start(self, run: RunState) -> None:
-        """No harm yet."""
-        self.harm = {g: 0.0 for g in GROUPS}
-        self.ego_involved = {g: 0.0 for g in GROUPS}
-        self.third_party = {g: 0.0 for g in GROUPS}
+        """No collisions yet."""
+        self.records: list[ImpactRecord] = []
 
     def on_impact(self, run: RunState, record: ImpactRecord) -> None:
-        """Add both bodies' measured harm to their groups."""
-        split = self.ego_involved if record.involves_ego else self.third_party
-        for body in (record.a, record.b):
-            if body.group in self.harm and math.isfinite(body.harm_measured):
-                self.harm[body.group] += body.harm_measured
-                split[body.group] += body.harm_measured
+        """Keep the collision."""
+        self.records.append(record)
 
     def values(self, run: RunState) -> dict[str, Any]:
         """``harm``, ``harm_ego_involved`` and ``harm_third_party``."""
         return {
-            "harm": dict(self.harm),
-            "harm_ego_involved": dict(self.ego_involved),
-            "harm_third_party": dict(self.third_party),
+            "harm": combined_harm(self.records),
+            "harm_ego_involved": combined_harm([r for r in self.records if r.involves_ego]),
+            "harm_third_party": combined_harm([r for r in self.records if not r.involves_ego]),
         }
 
 

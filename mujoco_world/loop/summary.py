@@ -115,7 +115,9 @@ class RunSummary:
             executed plans. top_risks: up to 100 highest risk values per group.
         top_risks_by_type, top_ego_risks_by_type: up to 100 highest road-user risks
             R_k, and ego risks R_ego,k, per road-user type (``metrics.RiskByType``).
-        harm: summed measured harm per group over all collisions.
+        harm: measured harm per group over all collisions, an expected count of MAIS3+
+            injured: per body its impacts combine as 1 - prod(1 - h_i), the group sums
+            its bodies (``loop.metrics.combined_harm``).
         harm_ego_involved: the same over the collisions the ego took part in.
         harm_third_party: the same over collisions between other road users.
         min_distance: smallest ego-to-road-user distance [m] (negative: overlap).
