@@ -22,7 +22,7 @@ import shapely
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.geometry import rectangle_overlap
 from ethical_planner.reference_path import ReferencePath
-from ethical_planner.road_users import KinematicState, MotionHistory, RoadUser, Shape
+from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
 from ethical_planner.validation import check_non_negative
 from mujoco_world.agents.behaviour import Fleet, WorldView
 from mujoco_world.physics.control import (
@@ -254,6 +254,11 @@ class World:
         # Geoms of road users, for distance queries from the ego.
         self._other_geoms = self.scene.geom_ids[1:]
         self.heights = np.array([p.height for p in proxies])
+        # Road users that hide others: every one with sensor.occluders = "all", else
+        # vehicles only (pedestrians and cyclists are seen around); never the ego.
+        everyone = scenario.sensor.occluders == "all"
+        self._occluders = np.array([everyone or t not in VULNERABLE_TYPES for t in self.types])
+        self._occluders[0] = False
         #: Static boxes as sight sees them (walls, kerbs, debris, fixed obstacles).
         self._static_sight = Boxes.from_static(statics)
         #: Time each road user was first perceived by the planner [s] (nan: not yet), (n,).
@@ -548,9 +553,9 @@ class World:
         Bodies out of the world are never perceived. With a limited sensor
         (``SensorSpec``: range, field of view, occlusion) a road user is perceived if one
         of its five sample points (centre, corners) is in range, in the field of view
-        and, with occlusion, no other body of any type and no static box (wall, kerb,
-        debris, fixed obstacle) rises above the sight line from the sensor to the point
-        at half the road user's height (``physics.sight``).
+        and, with occlusion, no other occluding road user (``sensor.occluders``) and no
+        static box (wall, kerb, debris, fixed obstacle) rises above the sight line from
+        the sensor to the point at half the road user's height (``physics.sight``).
         """
         sensor = self.scenario.sensor
         visible = self.present.copy()
@@ -582,13 +587,12 @@ class World:
         """Boxes that may hide road users ``rows`` from ``eye``, and which to ignore for whom.
 
         Returns:
-            (boxes: the other road users in the world, then the static boxes near enough
+            (boxes: the occluding road users in the world, then the static boxes near enough
             and tall enough to cross a sight line; ignore: (len(rows), k) bool, a road
             user's own body).
         """
         qpos = self.scene.qpos
-        bodies = np.flatnonzero(self.present)
-        bodies = bodies[bodies != 0]
+        bodies = np.flatnonzero(self.present & self._occluders)
         moving = Boxes(
             qpos[bodies, 0],
             qpos[bodies, 1],

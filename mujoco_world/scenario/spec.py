@@ -994,12 +994,14 @@ class SensorSpec:
 
     A road user is perceived if one of its five sample points (centre, corners) is
     within ``range``, within the field of view and, with ``occlusion``, not hidden
-    behind any body or static box (road users of every type, walls, kerbs, debris, fixed
+    behind a road user (``occluders``) or a static box (walls, kerbs, debris, fixed
     obstacles) that rises above the sight line from the sensor to the point at half the
     road user's height.
 
     Attributes:
         occlusion: bodies and static boxes hide what is behind them.
+        occluders: which road users hide others: ``vehicles`` (the default:
+            pedestrians and cyclists are seen around) or ``all``.
         range: perception range [m] around the sensor, or None for unlimited.
         fov: full opening angle of the field of view [deg], centred on the ego's
             heading (360: all around).
@@ -1008,6 +1010,7 @@ class SensorSpec:
     """
 
     occlusion: bool = False
+    occluders: str = "vehicles"
     range: float | None = None
     fov: float = 360.0
     height: float = 1.2
@@ -1017,6 +1020,10 @@ class SensorSpec:
         check(
             isinstance(self.occlusion, bool),
             f"sensor.occlusion must be true or false, got {self.occlusion!r}",
+        )
+        check(
+            self.occluders in ("vehicles", "all"),
+            f"sensor.occluders must be 'vehicles' or 'all', got {self.occluders!r}",
         )
         check_positive("sensor", range=self.range, fov=self.fov, height=self.height)
         check_finite("sensor", offset=self.offset)

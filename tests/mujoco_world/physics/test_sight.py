@@ -128,17 +128,20 @@ def _world(**sensor):
 
 
 def test_the_world_sees_through_its_sensor():
-    # Unlimited sensor: everything; occlusion: the adult pedestrian (1.75 m) hides the
-    # child (1.2 m) 15 m behind it in line; a 120 deg field of view misses the car behind
-    # on the left (145 deg off the heading).
+    # Unlimited sensor: everything; occlusion by every road user: the adult pedestrian
+    # (1.75 m) hides the child (1.2 m) 15 m behind it in line (by default only vehicles
+    # hide others); a 120 deg field of view misses the car behind on the left (145 deg
+    # off the heading).
     assert _world().visible().tolist() == [True, True, True, True]
-    assert _world(occlusion=True).visible().tolist() == [True, True, False, True]
+    assert _world(occlusion=True).visible().tolist() == [True, True, True, True]
+    assert _world(occlusion=True, occluders="all").visible().tolist() == [True, True, False, True]
     assert _world(fov=120.0).visible().tolist() == [True, True, True, False]
     assert _world(range=21.0).visible().tolist() == [True, True, False, True]
     # A sensor 4 m up looks over the adult's head onto the child (the sight line passes
     # the adult 20 m out of 35 at 4 - 20 / 35 * (4 - 0.6) = 2.06 m > 1.75 m; from 3 m: 1.63 m).
-    assert _world(occlusion=True, height=3.0).visible().tolist() == [True, True, False, True]
-    assert _world(occlusion=True, height=4.0).visible().tolist() == [True, True, True, True]
+    everyone = {"occlusion": True, "occluders": "all"}
+    assert _world(**everyone, height=3.0).visible().tolist() == [True, True, False, True]
+    assert _world(**everyone, height=4.0).visible().tolist() == [True, True, True, True]
 
 
 def test_walls_hide_a_car_behind_a_curve_until_the_ego_is_about_45_m_away():
