@@ -223,31 +223,45 @@ def test_risk_by_type_keeps_the_highest_values_per_road_user_type():
     assert set(values["top_risks_by_type"]) == {"car", "motorcycle"}
 
 
-def test_harm_per_group_sums_measured_harm_and_skips_walls():
+def test_harm_per_group_combines_a_bodys_impacts_adds_bodies_and_skips_walls():
     metric = HarmPerGroup()
     metric.start(None)
 
     def record(a, b, ego=True):
-        return SimpleNamespace(a=SimpleNamespace(**a), b=SimpleNamespace(**b), involves_ego=ego)
+        entities = SimpleNamespace(
+            a=SimpleNamespace(entity=a.pop("entity")), b=SimpleNamespace(entity=b.pop("entity"))
+        )
+        return SimpleNamespace(
+            measurement=entities, a=SimpleNamespace(**a), b=SimpleNamespace(**b), involves_ego=ego
+        )
 
     metric.on_impact(
-        None, record({"group": "ego", "harm_measured": 0.2}, {"group": "vulnerable", "harm_measured": 0.5})
+        None,
+        record(
+            {"entity": 0, "group": "ego", "harm_measured": 0.2},
+            {"entity": 1, "group": "vulnerable", "harm_measured": 0.5},
+        ),
     )
     metric.on_impact(
-        None, record({"group": "ego", "harm_measured": 0.1}, {"group": "static", "harm_measured": math.nan})
+        None,
+        record(
+            {"entity": 0, "group": "ego", "harm_measured": 0.1},
+            {"entity": -1, "group": "static", "harm_measured": math.nan},
+        ),
     )
     # a taxi hits a cyclist: third party, not the ego's
     metric.on_impact(
         None,
         record(
-            {"group": "third_party", "harm_measured": 0.05},
-            {"group": "vulnerable", "harm_measured": 0.25},
+            {"entity": 2, "group": "third_party", "harm_measured": 0.05},
+            {"entity": 3, "group": "vulnerable", "harm_measured": 0.25},
             ego=False,
         ),
     )
     values = metric.values(None)
-    assert values["harm"] == pytest.approx({"ego": 0.3, "third_party": 0.05, "vulnerable": 0.75})
-    assert values["harm_ego_involved"] == pytest.approx({"ego": 0.3, "third_party": 0.0, "vulnerable": 0.5})
+    # The ego hit twice: 1 - 0.8 * 0.9 = 0.28 (not 0.3); two vulnerable bodies add up.
+    assert values["harm"] == pytest.approx({"ego": 0.28, "third_party": 0.05, "vulnerable": 0.75})
+    assert values["harm_ego_involved"] == pytest.approx({"ego": 0.28, "third_party": 0.0, "vulnerable": 0.5})
     assert values["harm_third_party"] == pytest.approx({"ego": 0.0, "third_party": 0.05, "vulnerable": 0.25})
 
 
