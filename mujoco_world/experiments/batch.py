@@ -515,12 +515,8 @@ def comparison_table(records: Iterable[RunRecord]) -> str:
         "avoid: the ego collision was avoidable by an open-loop manoeuvre (etp avoidability; ?: not "
         "searched, -: no ego collision); expect: the scenario's [expect] table passed or FAILED",
         "",
-        "per planner: runs, outcomes; mean of max risk per group and summed measured harm per group "
-        "over the runs that did not fail",
+        "test suite (scenario [expect] tables): pass / fail / no expectations",
     ]
-    for planner in sorted({r.summary.planner for r in runs}):
-        lines.append(_planner_totals(planner, [r for r in runs if r.summary.planner == planner]))
-    lines += ["", "test suite (scenario [expect] tables): pass / fail / no expectations"]
     for planner in sorted({r.summary.planner for r in runs}):
         verdicts = [r.summary.verdict for r in runs if r.summary.planner == planner]
         failing = sorted(
@@ -530,6 +526,13 @@ def comparison_table(records: Iterable[RunRecord]) -> str:
             f"  {planner:<9} {verdicts.count('pass'):>3} pass {verdicts.count('fail'):>3} fail "
             f"{verdicts.count('none'):>3} none" + (f"  | failing: {', '.join(failing)}" if failing else "")
         )
+    lines += [
+        "",
+        "per planner: runs, outcomes; mean of max risk per group and summed measured harm per group "
+        "over the runs that did not fail",
+    ]
+    for planner in sorted({r.summary.planner for r in runs}):
+        lines.append(_planner_totals(planner, [r for r in runs if r.summary.planner == planner]))
     return "\n".join(lines)
 
 
