@@ -174,3 +174,27 @@ def test_first_seen_is_in_the_summary():
         scenario, duration=0.5, sensor=dataclasses.replace(scenario.sensor, occlusion=False)
     )
     assert run_scenario(open_view, "keep_lane", seed=0).first_seen == {"stopped": 0.0}
+
+
+def test_a_car_hides_a_pedestrian_behind_it_unless_the_sensor_looks_over_it():
+    # Car (1.45 m) 15 m ahead of the sensor, a pedestrian 10 m behind it in line: the
+    # sight line to the pedestrian's middle (0.875 m) from 1.2 m stays below the roof; from
+    # 4 m it passes the car at 4 - 15 / 25 * (4 - 0.875) = 2.1 m.
+    def world(**sensor):
+        return World(
+            scenario_from_dict(
+                {
+                    "name": "t",
+                    "road": {"length": 120.0, "boundary": "none"},
+                    "ego": {"s0": 5.0, "speed": 0.0},
+                    "sensor": {"occlusion": True, **sensor},
+                    "road_users": [
+                        {"name": "car", "type": "car", "s0": 20.0, "behaviour": {"speed": 0.0}},
+                        {"name": "walker", "type": "pedestrian", "s0": 30.0, "behaviour": {"speed": 0.0}},
+                    ],
+                }
+            )
+        )
+
+    assert world().visible().tolist() == [True, True, False]
+    assert world(height=4.0).visible().tolist() == [True, True, True]
