@@ -629,7 +629,7 @@ class Planner:
                 config.responsibility,
             )
             r_obs, r_ego = r_obs[0], r_ego[0]
-            leaves = chosen.risk.boundary_risk[j : j + 1] > 0.0
+            leaves = chosen.risk.leaves_road[j : j + 1]
             risks, present = risk_set(
                 risk.risk_obs[j : j + 1], risk.risk_ego[j : j + 1], risk.boundary_risk[j : j + 1], leaves
             )

@@ -181,7 +181,7 @@ class RoadGeometry:
         return tuple(boxes)
 
 
-#: Height of debris boxes [m] (pictures only: the world is planar).
+#: Height of debris boxes [m]: what they hide from the ego's sensor (physics.sight) and their picture.
 DEBRIS_HEIGHT_M = 0.5
 
 

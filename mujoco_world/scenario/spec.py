@@ -1172,6 +1172,10 @@ class ExpectSpec:
     max_rule_violations: int | None = None
 
     def __post_init__(self) -> None:
+        check(
+            isinstance(self.outcome, str | list | tuple),
+            f"expect.outcome must be an outcome name or a list of them, got {self.outcome!r}",
+        )
         outcome = (self.outcome,) if isinstance(self.outcome, str) else tuple(self.outcome)
         bad = [o for o in outcome if o not in OUTCOMES]
         check(not bad, f"expect.outcome must name outcomes among {', '.join(OUTCOMES)}, got {bad}")
@@ -1293,6 +1297,20 @@ class Scenario:
         lines = [line.name for line in self.stop_lines]
         twice = sorted({n for n in lines if lines.count(n) > 1})
         check(not twice, f"stop_lines: duplicate names {twice}")
+        front = self.ego.s0 + 0.5 * self.ego.length
+        for i, line in enumerate(self.stop_lines):
+            # A line the ego's front has passed at the start would count as crossed at
+            # once; one beyond the road would never be checked.
+            check(
+                line.s > front,
+                f"stop_lines[{i}] ({line.name}).s must lie ahead of the ego's front at the start "
+                f"(> ego.s0 + ego.length / 2 = {front:g} m), got {line.s:g}",
+            )
+            check(
+                self.road.kind is RoadKind.MAP or line.s <= length,
+                f"stop_lines[{i}] ({line.name}).s must lie on the road (<= road.length {length:g} m), "
+                f"got {line.s:g}",
+            )
         lanes = self.road.lanes
         check(self.ego.lane < lanes, f"ego.lane must be < road.lanes ({lanes}), got {self.ego.lane}")
         if self.road.kind is not RoadKind.INTERSECTION:

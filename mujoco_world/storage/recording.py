@@ -820,7 +820,7 @@ class RerunRecorder(RunObserver):
             rrb.Horizontal(
                 rrb.Vertical(
                     rrb.Tabs(follow, overview, name="scene"),
-                    rrb.TextLogView(origin="/", contents=["decision", "impacts"], name="decisions"),
+                    rrb.TextLogView(origin="/", contents=["decision", "impacts", "sight"], name="decisions"),
                     row_shares=[3, 1],
                 ),
                 rrb.Vertical(

@@ -105,6 +105,9 @@ def test_the_planner_receives_the_stop_lines_as_environment_data():
         ),
         ({"name": "a", "s": 50.0, "red": [[0.0, 5.0], [4.0, 8.0]]}, "must be in order and not overlap"),
         ({"name": "a", "s": 50.0, "stop": True, "zone": 3.0}, "unknown key 'stop_lines[0].zone'"),
+        # ego.s0 = 5, length 4.508: its front is at 7.254 m; a line there counts as crossed at once
+        ({"name": "a", "s": 7.0, "stop": True}, ".s must lie ahead of the ego's front at the start"),
+        ({"name": "a", "s": 150.0, "stop": True}, ".s must lie on the road"),
     ],
 )
 def test_bad_stop_lines_are_named(line, message):

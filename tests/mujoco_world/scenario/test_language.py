@@ -284,6 +284,7 @@ def test_verdict_and_record_round_trip():
     ("expect", "message"),
     [
         ({"outcome": "goals"}, "expect.outcome must name outcomes among goal, timeout"),
+        ({"outcome": 3}, "expect.outcome must be an outcome name or a list of them, got 3"),
         ({"ego_collision": "no"}, "expect.ego_collision must be true or false, got 'no'"),
         ({"max_collisions": 1.5}, "expect.max_collisions"),
         ({"max_vulnerable_harm": -0.1}, "expect.max_vulnerable_harm must lie in [0, 1000]"),
