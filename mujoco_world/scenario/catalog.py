@@ -659,9 +659,11 @@ def red_light_for_ego(rng: np.random.Generator | None = None) -> Scenario:
     red = ((0.0, draw(9.0, 7.0, 11.0)),)
     line = StopLineSpec("light", s=half - road.half_width - road.shoulder - 2.0, red=red)
     cross_speed = draw(12.0, 10.0, 13.9)
-    # The cross car reaches the ego's lane about 6 s after the start (on its green).
+    # The cross car reaches the ego's lane about 6 s after the start (on its green); a
+    # fast random variant starts at the cross road's end (80 m at 13.9 m/s: 5.8 s).
     cross = RouteSpec(road="cross", lane=0)
-    crossing = _user("crossing", "car", cross, half - 6.0 * cross_speed, _scripted(cross_speed))
+    start = max(half - 6.0 * cross_speed, 1.0)
+    crossing = _user("crossing", "car", cross, start, _scripted(cross_speed))
     return Scenario(
         name="red_light_for_ego",
         description="the ego's light is red for 9 s; a car crosses on its green meanwhile",

@@ -455,6 +455,14 @@ class ConditionSpec:
                 f"when.{name} must be 'ego', 'self' or a road user's name, got {value!r}",
             )
         check(self.to != "self", "when.to must be 'ego' or another road user's name, not 'self'")
+        for quantity in ("distance", "s", "speed"):
+            above, below = getattr(self, f"{quantity}_above"), getattr(self, f"{quantity}_below")
+            if above is not None and below is not None:
+                check(
+                    above < below,
+                    f"when.{quantity}_above ({above:g}) must be below when.{quantity}_below ({below:g}): "
+                    "otherwise the event can never fire",
+                )
 
     @property
     def needs_ego_s(self) -> bool:
@@ -1348,11 +1356,21 @@ class Scenario:
         names = [d.name for d in self.debris]
         twice = sorted({n for n in names if names.count(n) > 1})
         check(not twice, f"debris: duplicate names {twice}")
+        road = self.road
+        left = road.half_width + road.shoulder
+        right = road.half_width + road.parking_width + road.shoulder
         for i, piece in enumerate(self.debris):
             check(
                 piece.s <= length,
                 f"debris[{i}] ({piece.name}).s must lie on the road (<= road.length {length:g} m), "
                 f"got {piece.s}",
+            )
+            # Off the drivable area it would be neither a hole for the planner nor in anyone's way.
+            reach = 0.5 * math.hypot(piece.length, piece.width)
+            check(
+                road.kind is RoadKind.MAP or -right < piece.offset + reach and piece.offset - reach < left,
+                f"debris[{i}] ({piece.name}).offset must put it on the road ({-right:g} to {left:g} m "
+                f"from the reference line), got {piece.offset:g}",
             )
 
     def _check_events(self) -> None:

@@ -201,6 +201,10 @@ def test_debris_is_validated_by_name():
         _scenario(debris=[{"name": "b", "s": 10.0}, {"name": "b", "s": 20.0}])
     with pytest.raises(ValueError, match=re_escape("debris[0].length must lie in [0.1, 20] m")):
         _scenario(debris=[{"name": "b", "s": 10.0, "length": 50.0}])
+    # Two lanes of 3.5 m and 0.5 m shoulders: the road spans -4 to 4 m.
+    with pytest.raises(ValueError, match=re_escape("(b).offset must put it on the road (-4 to 4 m")):
+        _scenario(debris=[{"name": "b", "s": 30.0, "offset": 19.0}])
+    assert _scenario(debris=[{"name": "b", "s": 30.0, "offset": -4.3}]).debris[0].offset == -4.3  # reaches in
 
 
 # ----------------------------------------------------------------------------- [expect]

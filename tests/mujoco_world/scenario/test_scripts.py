@@ -149,6 +149,11 @@ def test_distance_and_time_to_collision_conditions():
         ),
         ({"when": {"time": 1.0}, "do": {"change_lane": 9}}, "do.change_lane must lie in -4..4"),
         ({"when": {"time": 1.0, "to": "a"}, "do": {"stop": True}}, "a road user measures to others"),
+        (
+            {"when": {"distance_above": 10.0, "distance_below": 5.0}, "do": {"stop": True}},
+            "events[0].when.distance_above (10) must be below when.distance_below (5)",
+        ),
+        ({"when": {"speed_above": 3.0, "speed_below": 3.0}, "do": {"stop": True}}, "can never fire"),
     ],
 )
 def test_bad_events_are_named(event, message):
