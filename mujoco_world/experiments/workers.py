@@ -58,17 +58,24 @@ _in_job = False
 def deferred_interrupts() -> Iterator[None]:
     """Hold back SIGINT for the duration of the block (delivered at its end).
 
-    Only in the main thread of a platform with ``signal.pthread_sigmask``; elsewhere a
-    plain block.
+    The block's SIGINT is only noted; at its end the handler in force before is restored
+    and the signal raised again, so that handler sees it once. (Masking the signal with
+    ``pthread_sigmask`` is not enough: it masks one thread, and the kernel then hands the
+    signal to another one, a watchdog or tqdm's monitor, whose Python handler still runs
+    in the main thread inside the block.) Only in the main thread, where Python allows
+    setting handlers; elsewhere a plain block.
     """
-    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    received: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+        signal.signal(signal.SIGINT, previous)
+        if received:
+            signal.raise_signal(signal.SIGINT)
 
 
 def describe_exit(exitcode: int | None) -> str:
@@ -199,13 +206,19 @@ class _Pool:
 
     def give(self, worker: _Worker, job: tuple[Any, Any]) -> bool:
         """Send ``job`` to ``worker``; False if the worker is gone (the job stays unstarted)."""
-        try:
-            worker.conn.send(job)
-        except (OSError, ValueError):
+        # A Ctrl-C between the send and the bookkeeping would leave a job the parent
+        # does not know it gave: the worker would index it, the parent never hear of it.
+        with deferred_interrupts():
+            try:
+                worker.conn.send(job)
+            except (OSError, ValueError):
+                sent = False
+            else:
+                worker.job = job
+                sent = True
+        if not sent:
             self._bury(worker)
-            return False
-        worker.job = job
-        return True
+        return sent
 
     def wait_once(self, timeout: float | None = None) -> None:
         """Wait for answers or deaths (at most ``timeout`` s) and handle them."""
@@ -223,21 +236,23 @@ class _Pool:
 
     def _answer(self, worker: _Worker) -> None:
         """Take a worker's answer, or bury it if it died."""
-        try:
-            answer = worker.conn.recv() if worker.job is not None and worker.conn.poll() else None
-        except (EOFError, OSError):
-            answer = None
-        if answer is not None:
-            key, ok, value, leaving = answer
-            worker.job = None
-            worker.leaving = leaving
-            with deferred_interrupts():
+        # Received and handed on as one step: a Ctrl-C between them would drop a
+        # result whose run the worker has already indexed.
+        with deferred_interrupts():
+            try:
+                answer = worker.conn.recv() if worker.job is not None and worker.conn.poll() else None
+            except (EOFError, OSError):
+                answer = None
+            if answer is not None:
+                key, ok, value, leaving = answer
+                worker.job = None
+                worker.leaving = leaving
                 if ok:
                     self.on_result(key, value)
                 else:
                     self.on_lost(key, value)
-            if not leaving and worker.process.is_alive():
-                return
+        if answer is not None and not worker.leaving and worker.process.is_alive():
+            return
         worker.process.join(timeout=1.0)
         if not worker.process.is_alive():
             self._bury(worker)
