@@ -514,6 +514,46 @@ class CommitmentConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class TrafficRulesConfig:
+    """How the planner treats the road's stop lines (``ethical_planner.traffic_rules``).
+
+    A candidate that crosses a binding stop line (a red light at its predicted crossing
+    time, or a stop sign the ego has not stood still at) gets validity level 4
+    (``Validity.BREAKS_TRAFFIC_RULE``): invalid, not costed. A line binds unless the ego
+    can no longer stop before it (the dilemma zone): a light that turns red later binds
+    while the ego can stop before the line at ``comfortable_deceleration``; a light that
+    is red now, and a stop sign, bind while it can stop at the vehicle's emergency
+    deceleration.
+
+    Attributes:
+        enabled: apply the stop lines (False: the planner ignores them, as before).
+        comfortable_deceleration: [m/s^2]. 3.0 m/s^2 (10 ft/s^2) is the deceleration
+            behind the ITE yellow-interval formula, which sizes the amber phase so that
+            a driver who cannot stop at it can clear the line. It also judges a
+            candidate's end state: if it cannot stop before a line at this deceleration,
+            the candidate is taken to cross it at its end speed.
+        stop_gap: the front stops this far before the line [m] (stop-line candidates).
+        min_deceleration: stop-line candidates brake at least this hard [m/s^2]; a line
+            further away than that stop gets none (the grid reaches it later).
+    """
+
+    enabled: bool = True
+    comfortable_deceleration: float = 3.0
+    stop_gap: float = 1.0
+    min_deceleration: float = 0.5
+
+    def __post_init__(self) -> None:
+        enabled = self.enabled
+        check(isinstance(enabled, bool), f"traffic_rules.enabled must be true or false, got {enabled!r}")
+        check_positive(
+            "traffic_rules",
+            comfortable_deceleration=self.comfortable_deceleration,
+            min_deceleration=self.min_deceleration,
+        )
+        check_non_negative("traffic_rules", stop_gap=self.stop_gap)
+
+
+@dataclass(frozen=True, slots=True)
 class PlannerConfig:
     """Everything a planning cycle needs besides the scene.
 
@@ -531,6 +571,7 @@ class PlannerConfig:
     responsibility: ResponsibilityConfig = field(default_factory=ResponsibilityConfig)
     weights: CostWeights = field(default_factory=CostWeights)
     commitment: CommitmentConfig = field(default_factory=CommitmentConfig)
+    traffic_rules: TrafficRulesConfig = field(default_factory=TrafficRulesConfig)
 
     def __post_init__(self) -> None:
         if self.desired_speed is not None:

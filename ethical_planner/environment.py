@@ -17,19 +17,22 @@ class StopLine:
     """A stop line on the reference path: a traffic light's or a stop sign's.
 
     Environment data for the planner (the scenario's ``[[stop_lines]]``); the world
-    judges the ego's violations itself. The planner does not read it yet: whether a
-    candidate crossing a red line is invalid or costed is the planner's decision.
+    judges the ego's violations itself. The planner makes a candidate that crosses a
+    binding line invalid (``ethical_planner.traffic_rules``).
 
     Attributes:
         s: arc length along the reference path [m].
         red: (start, end) times [s] of the run in which the light is red; empty for a
             stop sign.
         stop: a stop sign (stand still before crossing).
+        stop_zone: a standstill with the front this far before the line or less counts
+            as the stop at a stop sign [m].
     """
 
     s: float
     red: tuple[tuple[float, float], ...] = ()
     stop: bool = False
+    stop_zone: float = 10.0
 
     def red_at(self, time: float) -> bool:
         """True if the light is red at ``time`` [s]."""

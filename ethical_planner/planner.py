@@ -33,11 +33,13 @@ from ethical_planner.sampling import (
     CandidateKind,
     CandidateParameters,
     Candidates,
+    FrenetState,
     PreviousPlan,
     emergency_braking,
     frenet_state,
     sample_candidates,
 )
+from ethical_planner.traffic_rules import StopLines, breaks_stop_lines, stood_at, stop_targets
 from ethical_planner.validity import Validity, physically_invalid, validity_levels
 from ethical_planner.workers import Workers
 
@@ -303,6 +305,7 @@ class Planner:
         self.predictor = predictor
         self.workers = Workers() if workers is None else workers
         self._previous: PreviousPlan | None = None
+        self._stood = np.zeros(len(environment.stop_lines), dtype=bool)
         self.desired_speed = (
             config.desired_speed if config.desired_speed is not None else environment.speed_limit
         )
@@ -313,6 +316,7 @@ class Planner:
         prediction: Prediction,
         corridors: LegalCorridors,
         timings: dict[str, float],
+        lines: StopLines | None = None,
     ) -> _Evaluation:
         config = self.config
         clock = time.perf_counter()
@@ -334,11 +338,15 @@ class Planner:
             candidates, self.ego_shape, self.environment, config.risk.road_edge_margin, on_road
         )
         max_risk = config.risk.max_acceptable_risk
-        possible = validity_levels(
-            invalid, collision[:, None, None], outside, np.zeros((n, k)), np.zeros(n), max_risk
+        breaks = self._breaks_rules(candidates, lines)
+        zero_risk = np.zeros((n, k)), np.zeros(n)
+        possible = _rule_levels(
+            validity_levels(invalid, collision[:, None, None], outside, *zero_risk, max_risk), breaks
         )
+        # Risk decides between a valid plan and one that breaks a rule (levels 10 and 4):
+        # a plan may fall to level 3, below a rule breaker within R_max. Both are assessed.
         best = int(possible.max())
-        assessed = np.flatnonzero(possible == best)
+        assessed = np.flatnonzero(possible >= min(best, Validity.BREAKS_TRAFFIC_RULE))
         timings["validity"] = timings.get("validity", 0.0) + _since(clock)
 
         clock = time.perf_counter()
@@ -364,6 +372,7 @@ class Planner:
         ego_combined = np.zeros(n)
         ego_combined[assessed] = risk.ego_combined
         levels = validity_levels(invalid, collision[:, None, None], outside, risk_obs, ego_combined, max_risk)
+        levels = _rule_levels(levels, breaks)
         timings["risk"] = timings.get("risk", 0.0) + _since(clock)
 
         clock = time.perf_counter()
@@ -385,6 +394,28 @@ class Planner:
         costs = _full_costs(self._costs(candidates, risk, r_obs, r_ego, levels), assessed, n)
         timings["cost"] = timings.get("cost", 0.0) + _since(clock)
         return _Evaluation(candidates, risk, r_obs, r_ego, levels, invalid, costs, risk_obs, ego_combined)
+
+    def _breaks_rules(self, candidates: Candidates, lines: StopLines | None) -> np.ndarray:
+        """Candidates that cross a binding stop line, shape (n,) (``traffic_rules``)."""
+        if lines is None:
+            return np.zeros(candidates.n_traj, dtype=bool)
+        return breaks_stop_lines(
+            candidates.s + 0.5 * self.ego_shape.length,
+            candidates.s_dot[:, -1],
+            candidates.t,
+            lines,
+            self.config.traffic_rules.comfortable_deceleration,
+        )
+
+    def _stop_lines(self, start: FrenetState, speed: float, now: float) -> StopLines | None:
+        """This cycle's stop lines, after noting a standstill at a stop sign; None without any."""
+        lines = self.environment.stop_lines
+        rules = self.config.traffic_rules
+        if not lines or not rules.enabled:
+            return None
+        front_offset = 0.5 * self.ego_shape.length
+        self._stood |= stood_at(lines, start.s + front_offset, speed)
+        return StopLines.of(lines, start, front_offset, now, self._stood, self.config.vehicle, rules)
 
     def _costs(
         self,
@@ -437,6 +468,7 @@ class Planner:
         ego_state: KinematicState,
         road_users: Sequence[RoadUser],
         prediction: Prediction | None = None,
+        now: float = 0.0,
     ) -> Decision:
         """Run one planning cycle.
 
@@ -446,6 +478,8 @@ class Planner:
             prediction: a prediction on the planner's time grid; by default the
                 planner's predictor makes one. Either way its covariances are floored
                 at ``config.prediction.covariance_floor``.
+            now: the cycle's time on the clock of the stop lines' red windows [s]
+                (the run's time).
 
         Returns:
             The decision; never None. If every candidate is physically invalid, the
@@ -459,8 +493,18 @@ class Planner:
         path = self.environment.reference_path
         start = frenet_state(ego_state, path)
         previous = self._previous if config.commitment.enabled else None
+        lines = self._stop_lines(start, ego_state.v, now)
+        rules = config.traffic_rules
+        front_offset = 0.5 * self.ego_shape.length
         candidates = sample_candidates(
-            start, path, config.sampling, config.vehicle, previous, config.commitment.max_deviation
+            start,
+            path,
+            config.sampling,
+            config.vehicle,
+            previous,
+            config.commitment.max_deviation,
+            None if lines is None else stop_targets(lines, start, front_offset, rules.stop_gap),
+            rules.min_deceleration,
         )
         timings["sampling"] = _since(clock)
         clock = time.perf_counter()
@@ -482,14 +526,14 @@ class Planner:
         corridors = LegalCorridors.of(road_users, self.environment)
         timings["prediction"] = _since(clock)
 
-        grid = self._evaluate(candidates, prediction, corridors, timings)
+        grid = self._evaluate(candidates, prediction, corridors, timings, lines)
         clock = time.perf_counter()
         best_level = int(grid.levels.max())
         chosen = grid
         emergency = False
         if best_level == Validity.PHYSICALLY_INVALID:
             brake = emergency_braking(start, path, candidates.t, config.vehicle)
-            chosen = self._evaluate(brake, prediction, corridors, timings)
+            chosen = self._evaluate(brake, prediction, corridors, timings, lines)
             index, emergency, continued = 0, True, False
             reason = (
                 "emergency braking: every sampled candidate breaks a physical limit ("
@@ -506,8 +550,9 @@ class Planner:
         )
 
     def reset(self) -> None:
-        """Forget the previous plan (a new run, or the ego was moved)."""
+        """Forget the previous plan and the stop signs stood at (a new run, or the ego was moved)."""
         self._previous = None
+        self._stood[:] = False
 
     def _choose(self, grid: _Evaluation, best_level: int) -> tuple[int, str, bool]:
         """Cheapest candidate of the highest level, unless the previous plan is as good.
@@ -691,6 +736,11 @@ def _best_by_level(grid: _Evaluation) -> dict[int, LevelBest]:
         int(level): LevelBest(int(i), float(costs.total[i]), CandidateParameters.of(grid.candidates, int(i)))
         for level, i in zip(levels, order[first], strict=True)
     }
+
+
+def _rule_levels(levels: np.ndarray, breaks: np.ndarray) -> np.ndarray:
+    """``levels`` with the rule breakers lowered to ``BREAKS_TRAFFIC_RULE`` (never raised)."""
+    return np.where(breaks, np.minimum(levels, int(Validity.BREAKS_TRAFFIC_RULE)), levels)
 
 
 def _full_costs(costs: CostBreakdown, rows: np.ndarray, n: int) -> CostBreakdown:

@@ -428,7 +428,62 @@ def _brake_motion(
     fractions = np.asarray(config.brake_lateral_fractions)
     if start.s_dot < _STANDING_SPEED:
         decels, offsets, fractions = decels[-1:], np.array([start.d]), fractions[-1:]
-    lon_b, stop_distance, stop_time = braking_motion(start, decels, t, vehicle.max_jerk)
+    return _braking_part(start, t, decels, offsets, fractions, vehicle.max_jerk)
+
+
+def _stop_target_motion(
+    start: FrenetState,
+    t: np.ndarray,
+    config: SamplingConfig,
+    vehicle: VehicleConfig,
+    distances: np.ndarray,
+    min_deceleration: float,
+) -> CandidatePart | None:
+    """Braking candidates that stop after the given distances (stop targets).
+
+    For each distance D the deceleration b with which ``braking_motion`` stops after
+    exactly D (its stop distance falls monotonically in b; 40 bisection steps),
+    then every end offset and lateral fraction of the braking family. Distances that
+    need less than ``min_deceleration`` (far targets) or more than the emergency
+    deceleration (unreachable) get none; a standing ego gets none (the braking family
+    already stays).
+
+    Args:
+        distances: arc lengths the centre travels to each stop [m], shape (k,).
+        min_deceleration: [m/s^2].
+
+    Returns:
+        The part, or None if no target is reachable this way.
+    """
+    distances = np.asarray(distances, dtype=float)
+    emergency = vehicle.emergency_deceleration
+    if start.s_dot < _STANDING_SPEED or distances.size == 0:
+        return None
+    t0 = np.zeros(1)
+    _, reach = braking_motion(start, np.array([min_deceleration, emergency]), t0, vehicle.max_jerk)[:2]
+    distances = distances[(distances <= reach[0]) & (distances >= reach[1])]
+    if distances.size == 0:
+        return None
+    lo, hi = np.full(distances.size, min_deceleration), np.full(distances.size, emergency)
+    for _ in range(40):  # bisection, vectorised over the targets
+        mid = 0.5 * (lo + hi)
+        too_far = braking_motion(start, mid, t0, vehicle.max_jerk)[1] > distances
+        lo, hi = np.where(too_far, mid, lo), np.where(too_far, hi, mid)
+    offsets = np.unique(np.append(np.linspace(config.d_min, config.d_max, config.n_offsets), start.d))
+    fractions = np.asarray(config.brake_lateral_fractions)
+    return _braking_part(start, t, hi, offsets, fractions, vehicle.max_jerk)
+
+
+def _braking_part(
+    start: FrenetState,
+    t: np.ndarray,
+    decels: np.ndarray,
+    offsets: np.ndarray,
+    fractions: np.ndarray,
+    max_jerk: float,
+) -> CandidatePart:
+    """Braking candidates: every deceleration x end offset x lateral fraction."""
+    lon_b, stop_distance, stop_time = braking_motion(start, decels, t, max_jerk)
     n_b, n_d, n_f = len(decels), len(offsets), len(fractions)
     which = np.repeat(np.arange(n_b), n_d * n_f)  # deceleration varies slowest
     d_end = np.tile(np.repeat(offsets, n_f), n_b)
@@ -446,12 +501,16 @@ def sample_candidates(
     vehicle: VehicleConfig,
     previous: PreviousPlan | None = None,
     max_deviation: float = 0.5,
+    stop_targets: np.ndarray | None = None,
+    min_stop_deceleration: float = 0.5,
 ) -> Candidates:
     """Sample every family of candidates (see the module docstring).
 
     Grid end speeds span [v0 - b T, v0 + a T] clipped to [0, v_max] (b and a from
     ``config``); end offsets span [d_min, d_max]. The continuation of ``previous`` is
-    the last candidate if the ego is on it (``continue_plan``).
+    the last candidate if the ego is on it (``continue_plan``). ``stop_targets`` add
+    braking candidates (kind ``BRAKE``) that stop after exactly those distances
+    (``_stop_target_motion``: stop lines), before the continuation.
 
     Args:
         start: ego Frenet state.
@@ -461,6 +520,9 @@ def sample_candidates(
         previous: the plan chosen in the previous cycle, if any.
         max_deviation: largest distance [m] and speed difference [m/s] between the ego
             and ``previous`` at which it is continued.
+        stop_targets: arc lengths the centre travels to each stop target [m], shape (k,).
+        min_stop_deceleration: stop targets that need less braking get no candidate
+            [m/s^2].
     """
     dt = config.dt
     n_t = int(round(max(config.horizons) / dt)) + 1
@@ -468,6 +530,10 @@ def sample_candidates(
     parts = [_grid_motion(start, t, config, vehicle.v_max)]
     if config.brake_candidates:
         parts.append(_brake_motion(start, t, config, vehicle))
+    if stop_targets is not None:
+        stops = _stop_target_motion(start, t, config, vehicle, stop_targets, min_stop_deceleration)
+        if stops is not None:
+            parts.append(stops)
     if previous is not None:
         continued = continue_plan(previous, start, t, max_deviation)
         if continued is not None:

@@ -17,12 +17,20 @@ _ACCELERATION_TOLERANCE = 1e-6
 
 
 class Validity(IntEnum):
-    """Validity level; the planner chooses from the highest level available."""
+    """Validity level; the planner chooses from the highest level available.
+
+    ``BREAKS_TRAFFIC_RULE`` (``ethical_planner.traffic_rules``): the candidate crosses a
+    binding stop line; a candidate's level is the lowest that applies, so a rule
+    breaker that is also above R_max is level 3. It ranks above level 3: a plan within
+    R_max that runs a red light is chosen over plans that keep the rule at an
+    unacceptable risk (safety before the rule), and below every valid plan.
+    """
 
     PHYSICALLY_INVALID = 0
     COLLISION = 1
     LEAVES_ROAD = 2
     ABOVE_MAX_RISK = 3
+    BREAKS_TRAFFIC_RULE = 4
     VALID = 10
 
 

@@ -42,7 +42,7 @@ class EthicalPlanner(EgoPlanner):
 
     def plan(self, observation: Observation) -> Plan:
         """One planning cycle of the ethical planner."""
-        decision = self.planner.plan(observation.ego, observation.road_users)
+        decision = self.planner.plan(observation.ego, observation.road_users, now=observation.time)
         return Plan(decision.trajectory, decision)
 
 

@@ -23,6 +23,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from ethical_planner.road_users import VULNERABLE_TYPES, RoadUserType
+from ethical_planner.traffic_rules import STANDSTILL_MPS
 from mujoco_world.agents.ego_planner import Plan
 from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.loop.config import RunConfig
@@ -30,7 +31,6 @@ from mujoco_world.loop.state import RunState
 from mujoco_world.loop.summary import GROUPS, RuleViolation
 from mujoco_world.loop.world import World
 from mujoco_world.physics.safety import time_to_collision
-from mujoco_world.scenario.spec import STANDSTILL_MPS
 
 #: Number of highest risk values kept per group (paper Fig. 5 uses 100).
 TOP_RISKS = 100

@@ -1086,7 +1086,7 @@ class StopLineSpec:
     The world checks the ego against it (``loop.metrics.RuleViolations``): crossing the
     line (the ego's front passing ``s``) while the light is red is a ``red_light``
     violation; crossing a stop sign's line without having stood still (below
-    ``STANDSTILL_MPS``) within ``stop_zone`` before it is a ``stop_sign`` violation. The
+    ``traffic_rules.STANDSTILL_MPS``) within ``stop_zone`` before it is a ``stop_sign`` violation. The
     planner receives the line as environment data (``RoadEnvironment.stop_lines``).
 
     Attributes:
@@ -1135,11 +1135,7 @@ class StopLineSpec:
 
     def as_stop_line(self) -> StopLine:
         """The line as the planner's environment data."""
-        return StopLine(self.s, self.red, self.stop)
-
-
-#: Speed below which the ego stands still at a stop sign [m/s].
-STANDSTILL_MPS = 0.1
+        return StopLine(self.s, self.red, self.stop, self.stop_zone)
 
 
 @dataclass(frozen=True, slots=True)

@@ -238,6 +238,7 @@ REJECTED_LEVELS = (
     Validity.COLLISION,
     Validity.LEAVES_ROAD,
     Validity.ABOVE_MAX_RISK,
+    Validity.BREAKS_TRAFFIC_RULE,
 )
 
 

@@ -88,6 +88,22 @@ def test_the_ego_running_the_red_light_is_reported_and_fails_its_expectation():
     assert run_scenario(green, "keep_lane", seed=0).rule_violations == ()
 
 
+@pytest.mark.parametrize(
+    "planner",
+    [
+        "ethical",
+        pytest.param("selfish", marks=pytest.mark.slow),
+        pytest.param("standard", marks=pytest.mark.slow),
+    ],
+)
+def test_the_planners_wait_for_the_green_and_meet_every_expectation(planner):
+    """Closed loop: the planner respects the red light (ethical_planner.traffic_rules)."""
+    summary = run_scenario(get_scenario("red_light_for_ego"), planner, seed=0)
+    assert summary.rule_violations == ()
+    assert all(e.passed for e in summary.expectations), summary.expectations
+    assert summary.outcome == "goal"
+
+
 def test_the_planner_receives_the_stop_lines_as_environment_data():
     env = World(get_scenario("red_light_for_ego")).environment()
     assert env.stop_lines == (StopLine(74.0, ((0.0, 9.0),), False),)

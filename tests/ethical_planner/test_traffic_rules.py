@@ -1,0 +1,171 @@
+"""Stop lines in the planner: stop distances, red-window timing, the dilemma zone, stop targets."""
+
+import numpy as np
+import pytest
+
+from ethical_planner.config import SamplingConfig, TrafficRulesConfig, VehicleConfig, preset
+from ethical_planner.environment import RoadEnvironment, StopLine
+from ethical_planner.planner import Planner
+from ethical_planner.road_users import EGO_SHAPE, KinematicState
+from ethical_planner.sampling import CandidateKind, FrenetState, _stop_target_motion
+from ethical_planner.traffic_rules import StopLines, breaks_stop_lines, crossing_times, stop_distance
+from ethical_planner.validity import Validity
+
+VEHICLE = VehicleConfig()  # emergency 8 m/s^2, jerk 30 m/s^3
+RULES = TrafficRulesConfig()  # comfortable 3 m/s^2
+
+
+def _start(v: float, a: float = 0.0, s: float = 0.0) -> FrenetState:
+    return FrenetState(s=s, s_dot=v, s_ddot=a, d=0.0, d_dot=0.0, d_ddot=0.0)
+
+
+def test_stop_distance_by_hand():
+    # From 12 m/s, a0 = 0, jerk 30 m/s^3 to -b, then -b:
+    # b = 3: ramp 0.1 s, 1.2 - 30 * 0.001 / 6 = 1.195 m, speed 12 - 15 * 0.01 = 11.85 m/s,
+    #        then 11.85^2 / 6 = 23.40375 m: 24.59875 m.
+    # b = 8: ramp 0.2667 s, 3.2 - 5 * 0.2667^3 = 3.105185 m, speed 10.93333 m/s,
+    #        then 10.93333^2 / 16 = 7.471111 m: 10.576296 m.
+    d = stop_distance(_start(12.0), np.array([3.0, 8.0]), 30.0)
+    assert d == pytest.approx([24.59875, 10.576296], abs=1e-5)
+    # Without a ramp it is v^2 / (2 b).
+    assert stop_distance(_start(12.0), np.array([3.0]), 1e9) == pytest.approx([24.0], abs=1e-6)
+
+
+def _lines(lines, front, v, now=0.0, stood=None):
+    stood = np.zeros(len(lines), dtype=bool) if stood is None else np.asarray(stood)
+    return StopLines.of(tuple(lines), _start(v), front, now, stood, VEHICLE, RULES)
+
+
+def test_a_light_turning_red_later_binds_while_the_ego_can_stop_comfortably():
+    # Front at the centre (offset 0); comfortable stop from 12 m/s takes 24.59875 m.
+    red_later = ((5.0, 10.0),)
+    near = _lines([StopLine(24.5, red_later)], 0.0, 12.0)
+    far = _lines([StopLine(24.7, red_later)], 0.0, 12.0)
+    assert not near.binding[0]  # dilemma zone: proceeds
+    assert far.binding[0]
+    # The same gaps with the light red now: the emergency stop (10.58 m) decides.
+    assert _lines([StopLine(24.5, ((0.0, 10.0),))], 0.0, 12.0).binding[0]
+    assert _lines([StopLine(10.7, ((0.0, 10.0),))], 0.0, 12.0).binding[0]
+    assert not _lines([StopLine(10.5, ((0.0, 10.0),))], 0.0, 12.0).binding[0]
+
+
+def test_lines_that_do_not_bind():
+    green_now_on = _lines([StopLine(50.0, ((0.0, 4.0),))], 0.0, 10.0, now=4.0)
+    assert not green_now_on.binding[0]  # its last red window is over
+    behind = _lines([StopLine(3.0, ((0.0, 9.0),))], 4.0, 10.0)  # front 4 m, line 3 m
+    assert not behind.binding[0]
+    sign = StopLine(50.0, stop=True)
+    assert _lines([sign], 0.0, 10.0).binding[0]
+    assert not _lines([sign], 0.0, 10.0, stood=[True]).binding[0]
+
+
+def test_crossing_times_inside_and_after_the_horizon():
+    t = np.arange(31) * 0.1
+    front = 10.0 * t[None, :].repeat(2, axis=0)  # 10 m/s from 0: 30 m at 3 s
+    front[1] = np.minimum(front[1], 20.0)  # stops at 20 m
+    end_speed = np.array([10.0, 0.0])
+    when = crossing_times(front, end_speed, t, np.array([15.0, 40.0, 50.0]), 3.0)
+    # Line 15 m: 1.5 s. Line 40 m: gap 10 m < 10^2 / 6 = 16.7 m, committed: 3 + 10 / 10 = 4 s.
+    # Line 50 m: gap 20 m > 16.7 m: it can still stop, no crossing.
+    assert when[0] == pytest.approx([1.5, 4.0, np.inf])
+    assert when[1] == pytest.approx([1.5, np.inf, np.inf])  # stops at 20 m, past 15 m only
+    # Between samples the crossing is interpolated: 15.05 m at 1.505 s.
+    assert crossing_times(front, end_speed, t, np.array([15.05]), 3.0)[0, 0] == pytest.approx(1.505)
+
+
+def test_red_window_timing_of_the_crossing():
+    t = np.arange(31) * 0.1
+    front = 10.0 * t[None, :]  # crosses 15 m at 1.5 s
+    v = np.array([10.0])
+
+    def broken(red, now=0.0, s=15.0):
+        lines = _lines([StopLine(s, red)], 0.0, 0.0, now=now)
+        return bool(breaks_stop_lines(front, v, t, lines, 3.0)[0])
+
+    assert not broken(((4.0, 9.0),))  # crosses before the red
+    assert broken(((1.0, 2.0),))  # crosses inside it
+    assert not broken(((0.5, 1.5),))  # red ends exactly as it crosses (windows are [start, end))
+    assert broken(((1.5, 2.5),))
+    assert broken(((4.0, 9.0),), now=3.0)  # 3 + 1.5 = 4.5 s on the run's clock
+    assert broken(((4.0, 9.0), (10.0, 12.0)), now=9.0)  # the second window
+    assert not broken(((4.0, 9.0), (10.0, 12.0)), now=7.6)  # 9.1 s: between windows
+
+
+def test_stop_target_candidates_stop_at_the_target():
+    start = _start(12.0, s=5.0)
+    t = np.arange(101) * 0.1  # 10 s: the stop lies inside
+    part = _stop_target_motion(start, t, SamplingConfig(), VEHICLE, np.array([30.0, 60.0, 500.0, 5.0]), 0.5)
+    # 500 m needs < 0.5 m/s^2 and 5 m more than 8 m/s^2: no candidates for them.
+    b = np.unique(part.deceleration)
+    assert b.size == 2
+    stops = part.lon[0][:, -1]
+    assert np.sort(np.unique(stops.round(6))) == pytest.approx([35.0, 65.0], abs=1e-6)
+    assert np.all(part.lon[1][:, -1] == 0.0)
+    # By hand: ramp t_j = b / 30, s_j = 12 t_j - 5 t_j^3, v_j = 12 - 15 t_j^2, then v_j^2 / (2 b).
+    t_j = b / 30.0
+    assert 12 * t_j - 5 * t_j**3 + (12 - 15 * t_j**2) ** 2 / (2 * b) == pytest.approx([60.0, 30.0], abs=1e-6)
+    assert b == pytest.approx([1.2, 2.4], abs=0.05)  # v^2 / (2 D) without the ramp
+    assert part.kind == CandidateKind.BRAKE
+
+
+def _road(lines):
+    env = RoadEnvironment.along_path(np.array([[0.0, 0.0], [300.0, 0.0]]), lanes_left=1, speed_limit=13.9)
+    return RoadEnvironment(
+        env.reference_path, env.drivable_area, env.lane_width, env.lane_offsets, env.speed_limit, lines
+    )
+
+
+def _front_end(decision):
+    return decision.trajectory.x.max() + 0.5 * EGO_SHAPE.length
+
+
+def test_the_planner_stops_for_a_red_light_it_can_stop_for():
+    ego = KinematicState(x=10.0, y=0.0, yaw=0.0, v=12.0)
+    front = 10.0 + 0.5 * EGO_SHAPE.length
+    line = StopLine(front + 30.0, ((0.0, 20.0),))  # 30 m ahead, red for 20 s
+    planner = Planner(preset("ethical"), _road((line,)))
+    decision = planner.plan(ego, [], now=0.0)
+    assert decision.level == Validity.VALID
+    assert decision.level_counts[int(Validity.BREAKS_TRAFFIC_RULE)] > 0
+    end = decision.trajectory
+    # The plan ends before the line and can still stop before it at 3 m/s^2.
+    gap = line.s - (end.x[-1] + 0.5 * EGO_SHAPE.length)
+    assert gap > end.v[-1] ** 2 / 6.0 - 1e-9
+    # The same light green by then (red ended at 1 s): the planner keeps its speed.
+    green = Planner(preset("ethical"), _road((StopLine(line.s, ((0.0, 1.0),)),)))
+    assert _front_end(green.plan(ego, [], now=0.0)) > front + 33.0
+    assert Validity.BREAKS_TRAFFIC_RULE not in green.plan(ego, [], now=0.0).level_counts
+    # Rules off: the same red line is ignored.
+    off = Planner(preset("ethical").with_overrides({"traffic_rules": {"enabled": False}}), _road((line,)))
+    assert int(Validity.BREAKS_TRAFFIC_RULE) not in off.plan(ego, [], now=0.0).level_counts
+
+
+def test_in_the_dilemma_zone_the_planner_proceeds():
+    # Red now, 9 m ahead at 12 m/s: even braking at 8 m/s^2 takes 10.58 m.
+    ego = KinematicState(x=10.0, y=0.0, yaw=0.0, v=12.0)
+    front = 10.0 + 0.5 * EGO_SHAPE.length
+    planner = Planner(preset("ethical"), _road((StopLine(front + 9.0, ((0.0, 20.0),)),)))
+    decision = planner.plan(ego, [], now=0.0)
+    assert decision.level == Validity.VALID and int(Validity.BREAKS_TRAFFIC_RULE) not in decision.level_counts
+    assert _front_end(decision) > front + 30.0  # it goes on, it does not brake to a stop past the line
+    # 12 m ahead it can stop (10.58 m): it must, and does.
+    planner = Planner(preset("ethical"), _road((StopLine(front + 12.0, ((0.0, 20.0),)),)))
+    decision = planner.plan(ego, [], now=0.0)
+    assert decision.level == Validity.VALID and _front_end(decision) < front + 12.0
+
+
+def test_a_stop_sign_is_stopped_at_then_passed():
+    sign = StopLine(60.0, stop=True)
+    planner = Planner(preset("ethical"), _road((sign,)))
+    # Approaching at 10 m/s, 25 m before the line: the plan stops before it.
+    front = 60.0 - 25.0
+    decision = planner.plan(KinematicState(x=front - 0.5 * EGO_SHAPE.length, y=0.0, yaw=0.0, v=10.0), [])
+    assert _front_end(decision) < 60.0
+    # Standing 1 m before it: noted as the stop; the next cycle drives on.
+    standing = KinematicState(x=59.0 - 0.5 * EGO_SHAPE.length, y=0.0, yaw=0.0, v=0.0)
+    planner.plan(standing, [], now=5.0)
+    assert planner._stood.tolist() == [True]
+    rolling = KinematicState(x=59.0 - 0.5 * EGO_SHAPE.length, y=0.0, yaw=0.0, v=0.5)
+    assert _front_end(planner.plan(rolling, [], now=5.2)) > 61.0
+    planner.reset()
+    assert _front_end(planner.plan(rolling, [], now=5.2)) < 60.0
