@@ -127,12 +127,13 @@ TYPE_COLORS: dict[RoadUserType, tuple[int, int, int]] = {
     RoadUserType.TRAIN: (90, 90, 90),
 }
 EGO_COLOR = (20, 220, 220)
-#: RGBA colour of candidates per validity level (0, 1, 2, 3, 10).
+#: RGBA colour of candidates per validity level (0, 1, 2, 3, 4, 10).
 LEVEL_COLORS: dict[int, tuple[int, int, int, int]] = {
     0: (120, 120, 120, 60),
     1: (220, 40, 40, 90),
     2: (240, 140, 30, 90),
     3: (230, 210, 40, 90),
+    4: (170, 80, 220, 90),
     10: (60, 200, 80, 110),
 }
 _ELLIPSE_POINTS = 25
