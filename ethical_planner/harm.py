@@ -29,6 +29,7 @@ from scipy.special import expit
 
 from ethical_planner.geometry import wrap_angle, wrap_angle_in_place
 from ethical_planner.impulse import DeltaVModel, RestitutionLaw, planar_impulse
+from ethical_planner.jit import kernel
 from ethical_planner.records import from_mapping
 from ethical_planner.validation import (
     check_finite,
@@ -106,6 +107,7 @@ _REDUCED_BY_CODE = np.array(
 )  # fmt: skip
 #: Clock position by bin code (width 30 deg): right side k o'clock, left side 12 - k.
 _CLOCK_BY_CODE = np.array([12, 12, 1, 11, 2, 10, 3, 9, 4, 8, 5, 7, 6, 6], dtype=np.intp)
+_TWO_PI = 2.0 * math.pi
 
 
 # --------------------------------------------------------------------------- geometry
@@ -699,3 +701,187 @@ def collision_harm(
         ego_angle=full(ego_angle),
         obs_angle=full(obs_angle),
     )
+
+
+# --------------------------------------------------------------------------- compiled harm
+
+#: Functional forms as the compiled harm reads them (column 0 of a model row).
+_FORM_CODE: dict[FunctionalForm, int] = {
+    FunctionalForm.PROTECTED_LOGISTIC: 0,
+    FunctionalForm.UNPROTECTED_LOGISTIC: 1,
+    FunctionalForm.REFERENCE_SPEED: 2,
+}
+#: A model row: form code, c0, c1, bin width [rad] (0: no areas), then the area value of
+#: each bin code (``HarmCoefficients.lookup``, padded with zeros).
+_ROW_LOOKUP = 4
+_ROW_SIZE = _ROW_LOOKUP + _CLOCK_BY_CODE.size
+
+
+def _model_row(model: HarmModel | str) -> np.ndarray:
+    """One harm model as a row of numbers for ``_compiled_harm`` (see _ROW_SIZE)."""
+    c = coefficients(model)
+    bins = _AREA_BINS[c.areas]
+    row = np.zeros(_ROW_SIZE)
+    row[:_ROW_LOOKUP] = (_FORM_CODE[c.form], c.c0, c.c1, 0.0 if bins is None else bins.width)
+    row[_ROW_LOOKUP : _ROW_LOOKUP + c.lookup.size] = c.lookup
+    return row
+
+
+@kernel
+def _wrapped(angle: float) -> float:
+    """``wrap_angle_in_place`` of one angle [rad], the same operations in the same order."""
+    turns = np.rint(angle * (1.0 / _TWO_PI)) * _TWO_PI
+    angle -= turns
+    if angle <= -math.pi:
+        angle += _TWO_PI
+    if angle > math.pi:
+        angle -= _TWO_PI
+    return angle
+
+
+@kernel
+def _compiled_harm(row: np.ndarray, dv: float, wrapped: float) -> float:
+    """``_harm_unchecked`` of one collision: the model ``row``, delta-v [m/s], wrapped angle [rad]."""
+    width = row[3]
+    area = row[_ROW_LOOKUP]
+    if width > 0.0:
+        code = math.floor(abs(wrapped) * (1.0 / width) + 0.5) * 2.0
+        if wrapped > 0.0:
+            code += 1.0
+        area = row[_ROW_LOOKUP + int(code)]
+    form = row[0]
+    if form == 0.0:
+        logit = dv * row[2] + row[1] + area
+        return 1.0 / (1.0 + math.exp(-logit))
+    if form == 1.0:
+        logit = dv * row[2] - row[1]
+        return 1.0 / (1.0 + math.exp(-logit))
+    return min(1.0, (dv / area) ** row[2])
+
+
+@kernel
+def _collision_harm_eq1(
+    ego: np.ndarray,
+    ego_mass: float,
+    obs: np.ndarray,
+    obs_mass: np.ndarray,
+    obs_unprotected: np.ndarray,
+    flat: np.ndarray,
+    n_obs: int,
+    n_t: int,
+    rows: np.ndarray,
+    harm_ego: np.ndarray,
+    harm_obs: np.ndarray,
+) -> None:
+    """``collision_harm`` with Eq. 1 at triples (i, obs, step) of a (m, n_obs, n_t) grid.
+
+    Args:
+        ego: ego states per (i, step), column i * n_t + step, shape (5, m * n_t): x, y,
+            yaw, vx, vy [m, m, rad, m/s, m/s].
+        ego_mass: [kg].
+        obs: road-user states per (obs, step), column obs * n_t + step, shape (5, n_obs * n_t).
+        obs_mass: [kg], shape (n_obs,).
+        obs_unprotected: bool, shape (n_obs,).
+        flat: the triples' flat indices (i * n_obs + obs) * n_t + step, shape (q,).
+        n_obs, n_t: the grid's sizes.
+        rows: model rows (``_model_row``): protected, the ego's with an unprotected
+            partner (ignore angle), the unprotected partner's, shape (3, _ROW_SIZE).
+        harm_ego, harm_obs: outputs, shape (q,).
+    """
+    for j in range(flat.size):
+        pair = flat[j] // n_t
+        step = flat[j] - pair * n_t
+        i = pair // n_obs
+        road_user = pair - i * n_obs
+        e, o = i * n_t + step, road_user * n_t + step
+        mass = obs_mass[road_user]
+        closing = ego[3, e] - obs[3, o]
+        closing = closing * closing
+        dy = ego[4, e] - obs[4, o]
+        closing = math.sqrt(closing + dy * dy)
+        total = ego_mass + mass
+        dv_ego = closing * (mass / total)
+        dv_obs = closing * (ego_mass / total)
+        rel = math.atan2(obs[1, o] - ego[1, e], obs[0, o] - ego[0, e])
+        ego_angle = _wrapped(rel - ego[2, e])
+        obs_angle = _wrapped(rel - obs[2, o] + math.pi)
+        if obs_unprotected[road_user]:
+            harm_ego[j] = _compiled_harm(rows[1], dv_ego, ego_angle)
+            harm_obs[j] = _compiled_harm(rows[2], dv_obs, obs_angle)
+        else:
+            harm_ego[j] = _compiled_harm(rows[0], dv_ego, ego_angle)
+            harm_obs[j] = _compiled_harm(rows[0], dv_obs, obs_angle)
+
+
+def collision_harm_at(
+    ego: np.ndarray,
+    ego_mass: float,
+    obs: np.ndarray,
+    obs_mass: np.ndarray,
+    obs_unprotected: np.ndarray,
+    flat: np.ndarray,
+    model: HarmModel | str = DEFAULT_MODEL,
+    pedestrian_model: HarmModel | str = DEFAULT_PEDESTRIAN_MODEL,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``collision_harm`` with Eq. 1 delta-v at triples of a (candidate, road user, step) grid, compiled.
+
+    The planner's hot path: the collision at triple (i, obs, step) is between ego state
+    (i, step) and road-user state (obs, step); nothing is gathered per triple. The
+    arithmetic is ``collision_harm``'s in the same order (the same numbers to the bit
+    where the platform's libm is numpy's, as on Linux; tests compare the two).
+
+    Args:
+        ego: ego states, shape (5, m, n_t): x, y, yaw [m, m, rad] and velocity vx, vy [m/s].
+        ego_mass: [kg], > 0.
+        obs: road-user states, shape (5, n_obs, n_t), as ``ego``.
+        obs_mass: [kg], > 0, shape (n_obs,).
+        obs_unprotected: True where the road user is unprotected, shape (n_obs,), bool.
+        flat: flat indices (i * n_obs + obs) * n_t + step of the triples, shape (q,).
+        model: harm model of protected road users.
+        pedestrian_model: harm model of unprotected road users.
+
+    Returns:
+        (harm_ego, harm_obs), shape (q,) each.
+
+    Raises:
+        ValueError: on shapes that do not match, a triple outside the grid, a mass not > 0.
+    """
+    ego = np.ascontiguousarray(ego, dtype=float)
+    obs = np.ascontiguousarray(obs, dtype=float)
+    if (
+        ego.ndim != 3
+        or ego.shape[0] != 5
+        or obs.ndim != 3
+        or obs.shape[0] != 5
+        or obs.shape[2] != ego.shape[2]
+    ):
+        raise ValueError(
+            f"ego and obs must have shapes (5, m, n_t) and (5, n_obs, n_t), got {ego.shape}, {obs.shape}"
+        )
+    m, n_obs, n_t = ego.shape[1], obs.shape[1], ego.shape[2]
+    flat = np.ascontiguousarray(flat, dtype=np.int64)
+    obs_mass = np.ascontiguousarray(obs_mass, dtype=float)
+    obs_unprotected = np.ascontiguousarray(obs_unprotected, dtype=np.bool_)
+    if flat.ndim != 1 or (flat.size and (flat.min() < 0 or flat.max() >= m * n_obs * n_t)):
+        raise ValueError(f"flat must hold indices of the ({m}, {n_obs}, {n_t}) grid, shape (q,)")
+    if obs_mass.shape != (n_obs,) or obs_unprotected.shape != (n_obs,):
+        raise ValueError(f"obs_mass and obs_unprotected must have shape ({n_obs},)")
+    if not (math.isfinite(ego_mass) and ego_mass > 0.0) or np.any(~(obs_mass > 0.0)):
+        raise ValueError("ego_mass and obs_mass must be finite masses > 0 [kg]")
+    rows = np.stack([_model_row(model), _model_row(HarmModel.IGNORE_ANGLE), _model_row(pedestrian_model)])
+    harm_ego = np.empty(flat.size)
+    harm_obs = np.empty(flat.size)
+    _collision_harm_eq1(
+        ego.reshape(5, m * n_t),
+        float(ego_mass),
+        obs.reshape(5, n_obs * n_t),
+        obs_mass,
+        obs_unprotected,
+        flat,
+        n_obs,
+        n_t,
+        rows,
+        harm_ego,
+        harm_obs,
+    )
+    return harm_ego, harm_obs

@@ -25,7 +25,8 @@ from ethical_planner.collision_probability import (
 from ethical_planner.config import RiskConfig
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.geometry import rectangle_corners
-from ethical_planner.harm import HarmModel, boundary_harm, collision_harm
+from ethical_planner.harm import HarmModel, boundary_harm, collision_harm, collision_harm_at
+from ethical_planner.impulse import DeltaVModel
 from ethical_planner.prediction.base import Prediction
 from ethical_planner.road_users import RoadUserType, Shape
 from ethical_planner.sampling import Candidates
@@ -385,6 +386,31 @@ def _triple_harms(
     """
     n_t = candidates.t.size
     k = prediction.n_obs
+    if config.delta_v_model is DeltaVModel.EQ1:
+        yaw, speed = candidates.yaw[rows], candidates.v[rows]
+        ego = np.stack(
+            [candidates.x[rows], candidates.y[rows], yaw, speed * np.cos(yaw), speed * np.sin(yaw)]
+        )
+        obs_states = np.stack(
+            [
+                prediction.mean[..., 0],
+                prediction.mean[..., 1],
+                prediction.heading,
+                prediction.speed * np.cos(prediction.heading),
+                prediction.speed * np.sin(prediction.heading),
+            ]
+        )
+        harm_ego, harm_obs = collision_harm_at(
+            ego,
+            ego_mass,
+            obs_states,
+            prediction.mass,
+            prediction.vulnerable,
+            flat,
+            HarmModel(config.harm_model),
+            HarmModel(config.pedestrian_model),
+        )
+        return harm_obs, harm_ego
     harm_obs = np.empty(flat.size)
     harm_ego = np.empty(flat.size)
     obs_yaw = prediction.heading.ravel()

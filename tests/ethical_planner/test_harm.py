@@ -605,3 +605,70 @@ def test_collision_harm_with_the_planar_delta_v_model():
         collision_harm(**kwargs, delta_v_model="planar_impulse")
     with pytest.raises(ValueError, match="allowed: eq1, planar_impulse"):
         collision_harm(**kwargs, delta_v_model="eq7")
+
+
+def _grid_scenario(rng: np.random.Generator, m: int = 8, n_obs: int = 6, n_t: int = 5, q: int = 150):
+    """Ego states (5, m, n_t) and road-user states (5, n_obs, n_t) (x, y, yaw, vx, vy) and triples.
+
+    Road user 0 sits at exact bin edges of the ego's frame at steps 0-4 (45, 90, 135,
+    180 degrees; the ego 0 at the origin heading along x there).
+    """
+
+    def states(n):
+        return np.stack([rng.normal(0.0, 5.0, (n, n_t)), rng.normal(0.0, 5.0, (n, n_t)),
+                         rng.uniform(-4.0, 4.0, (n, n_t)), rng.uniform(-15.0, 15.0, (n, n_t)),
+                         rng.uniform(-15.0, 15.0, (n, n_t))])  # fmt: skip
+
+    ego, obs = states(m), states(n_obs)
+    ego[:, 0] = np.array([0.0, 0.0, 0.0, 10.0, 0.0])[:, None]
+    obs[0, 0], obs[1, 0] = (1.0, 0.0, -1.0, -1.0, 1.0), (1.0, 1.0, 1.0, 0.0, -1.0)
+    obs[2, 0] = (0.0, math.pi / 2, math.pi, -math.pi, math.pi / 4)
+    flat = np.unique(np.concatenate([np.arange(n_t), rng.integers(0, m * n_obs * n_t, q)]))
+    mass = rng.choice([75.0, 90.0, 1500.0, 25000.0], n_obs)
+    mass[0] = 1500.0
+    return ego, obs, flat, mass, mass < 100.0
+
+
+@pytest.mark.parametrize("model", VEHICLE_MODELS)
+@pytest.mark.parametrize("pedestrian_model", PEDESTRIAN_MODELS)
+def test_compiled_collision_harm_equals_numpy_and_the_scalar_reference(model, pedestrian_model):
+    """The planner's compiled Eq. 1 harm (``collision_harm_at``) against ``collision_harm``
+    (the same arithmetic, so to rounding) and against the golden table one value at a time."""
+    ego, obs, flat, mass, unprotected = _grid_scenario(np.random.default_rng(11))
+    harm_ego, harm_obs = H.collision_harm_at(
+        ego, 1475.0, obs, mass, unprotected, flat, model, pedestrian_model
+    )
+    i, road_user, step = np.unravel_index(flat, (ego.shape[1], obs.shape[1], ego.shape[2]))
+    e, o, m_obs, vulnerable = (
+        ego[:, i, step],
+        obs[:, road_user, step],
+        mass[road_user],
+        unprotected[road_user],
+    )
+    reference = collision_harm(1475.0, e[3:5].T, e[0:2].T, e[2], m_obs, o[3:5].T, o[0:2].T, o[2],
+                               vulnerable, model, pedestrian_model)  # fmt: skip
+    np.testing.assert_allclose(harm_ego, reference.harm_ego, rtol=0.0, atol=1e-14)
+    np.testing.assert_allclose(harm_obs, reference.harm_obs, rtol=0.0, atol=1e-14)
+    for j in range(flat.size):
+        closing = math.hypot(e[3, j] - o[3, j], e[4, j] - o[4, j])
+        rel = math.degrees(math.atan2(o[1, j] - e[1, j], o[0, j] - e[0, j]))
+        dv_ego, dv_obs = m_obs[j] / (1475.0 + m_obs[j]) * closing, 1475.0 / (1475.0 + m_obs[j]) * closing
+        if vulnerable[j]:
+            expected = (
+                scalar_harm(HarmModel.IGNORE_ANGLE, dv_ego, 0.0),
+                scalar_harm(pedestrian_model, dv_obs, 0.0),
+            )
+        else:
+            ego_deg, obs_deg = rel - math.degrees(e[2, j]), 180.0 + rel - math.degrees(o[2, j])
+            expected = (scalar_harm(model, dv_ego, ego_deg), scalar_harm(model, dv_obs, obs_deg))
+        assert (harm_ego[j], harm_obs[j]) == pytest.approx(expected, rel=1e-9)
+
+
+def test_compiled_collision_harm_refuses_bad_input():
+    ego, obs, flat, mass, unprotected = _grid_scenario(np.random.default_rng(2), q=5)
+    with pytest.raises(ValueError, match=r"flat must hold indices of the \(8, 6, 5\) grid"):
+        H.collision_harm_at(ego, 1475.0, obs, mass, unprotected, flat + 8 * 6 * 5)
+    with pytest.raises(ValueError, match="ego and obs must have shapes"):
+        H.collision_harm_at(ego[:4], 1475.0, obs, mass, unprotected, flat)
+    with pytest.raises(ValueError, match="masses > 0"):
+        H.collision_harm_at(ego, 1475.0, obs, -mass, unprotected, flat)
