@@ -352,15 +352,17 @@ def collision_probability(
     return CollisionProbability(probability, mean_overlap)
 
 
-def collides(tables: OctagonTables, rows: np.ndarray) -> np.ndarray:
+def collides(tables: OctagonTables, rows: np.ndarray, first_step: int = 0) -> np.ndarray:
     """Whether each candidate of ``rows`` meets a predicted mean occupancy at some step.
 
     The footprints overlap, touching counts, with a road user at its predicted mean
-    (the ``mean_overlap`` of ``collision_probability``, any road user, any step).
+    (the ``mean_overlap`` of ``collision_probability``, any road user, any step from
+    ``first_step`` on).
 
     Args:
         tables: the cycle's tables.
         rows: candidate indices, shape (m,).
+        first_step: the first step tested (1 leaves out the present, t = 0).
 
     Returns:
         Shape (m,), bool.
@@ -370,7 +372,15 @@ def collides(tables: OctagonTables, rows: np.ndarray) -> np.ndarray:
     if rows.size and tables.n_obs:
         k = tables.weights.shape[1]
         _collides(
-            tables.obs_rows, tables.ego_rows, tables.n_obs * k, k, tables.n_t, rows, tables.degenerate, out
+            tables.obs_rows,
+            tables.ego_rows,
+            tables.n_obs * k,
+            k,
+            tables.n_t,
+            first_step,
+            rows,
+            tables.degenerate,
+            out,
         )
     return out
 
@@ -961,11 +971,12 @@ def _collides(
     n_gauss: int,
     n_components: int,
     n_t: int,
+    first_step: int,
     rows: np.ndarray,
     degenerate: bool,
     out: np.ndarray,
 ) -> None:
-    """Whether candidate ``rows[i]`` meets a predicted mean occupancy at some step, out[i].
+    """Whether candidate ``rows[i]`` meets a predicted mean occupancy at a step >= ``first_step``, out[i].
 
     The footprints overlap (touching counts) when the mean lies in the closed octagon,
     which needs the discs to overlap first. A mixture's components share the mean:
@@ -976,7 +987,7 @@ def _collides(
         traj = rows[i]
         found = False
         for obs in range(0, n_gauss, n_components):
-            for step in range(n_t):
+            for step in range(first_step, n_t):
                 o = obs * n_t + step
                 e = traj * n_t + step
                 dx = ego_rows[0, e] - obs_rows[_O_MX, o]

@@ -324,6 +324,11 @@ class Planner:
         k = prediction.n_obs
         # Levels 0, 1 and 2 need no integral: physical limits, then (for the candidates
         # within them) a predicted mean occupancy, then (for the rest) the road edge.
+        # None of them judges the present sample (t = 0), which every candidate shares
+        # and none can change: an ego already within the edge margin, or touching a
+        # road user, would otherwise find every candidate at level 2 or 1. An ego
+        # within the edge margin needs a few steps to leave it: the margin is judged
+        # from the first step at which a plan is clear of it.
         invalid = physically_invalid(candidates, config.vehicle)
         broken = np.logical_or.reduce(list(invalid.values()))
         considered = np.flatnonzero(~broken) if not broken.all() else np.arange(n)
@@ -331,12 +336,19 @@ class Planner:
             candidates, considered, prediction, self.ego_shape, config.risk.gate_sigmas
         )
         collision = np.zeros(n, dtype=bool)
-        collision[considered] = collides(tables, np.arange(considered.size))
+        collision[considered] = collides(tables, np.arange(considered.size), first_step=1)
         outside = np.zeros((n, n_t), dtype=bool)
         on_road = considered[~collision[considered]]
         outside[on_road] = outside_drivable_area(
             candidates, self.ego_shape, self.environment, config.risk.road_edge_margin, on_road
         )
+        if outside[on_road, 0].any():
+            # The ego is within the edge margin now: the margin is not judged until the
+            # plan has cleared it (the road edge itself is, from the first step on).
+            inherited = np.logical_and.accumulate(outside[on_road], axis=1)
+            edge = outside_drivable_area(candidates, self.ego_shape, self.environment, 0.0, on_road)
+            outside[on_road] = (outside[on_road] & ~inherited) | edge
+        outside[:, 0] = False
         max_risk = config.risk.max_acceptable_risk
         breaks = self._breaks_rules(candidates, lines)
         zero_risk = np.zeros((n, k)), np.zeros(n)

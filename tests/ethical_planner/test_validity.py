@@ -12,7 +12,7 @@ import pytest
 from ethical_planner.config import VehicleConfig, preset
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.planner import Planner
-from ethical_planner.road_users import KinematicState
+from ethical_planner.road_users import EGO_SHAPE, KinematicState, RoadUser, RoadUserType, Shape
 from ethical_planner.validity import LIMITS, Validity, physically_invalid, validity_levels
 
 VEHICLE = VehicleConfig(v_max=30.0)
@@ -220,3 +220,31 @@ def test_a_measured_deceleration_beyond_the_limit_leaves_valid_plans():
     decision = _plan({"desired_speed": 0.0}, KinematicState(0, 0, 0, 5.0, a=-8.06))
     assert decision.level == Validity.VALID
     assert decision.trajectory.a[1:].min() >= -8.0 - 1e-6
+
+
+def test_an_ego_already_within_the_edge_margin_keeps_valid_plans():
+    # Levels 1 and 2 leave out the present sample as level 0 does. The ego's footprint
+    # reaches y = -0.75 - 0.9 = -1.65; grown by the 0.25 m edge margin it passes the
+    # road edge at -1.75 m at t = 0 already. Plans that steer back to the lane centre
+    # leave the margin free after t = 0: they are valid.
+    decision = _plan({}, KinematicState(0, -0.75, 0, 10.0))
+    assert decision.level == Validity.VALID
+    assert decision.trajectory.y[-1] > -0.3
+    # The edge test itself still sees the present sample beyond the margin.
+    config = preset("standard")
+    assert Planner(config, STRAIGHT).plan(KinematicState(0, -0.75, 0, 10.0), []).level_counts.get(2, 0) > 0
+
+
+def test_a_road_user_touching_the_ego_now_but_pulling_away_leaves_valid_plans():
+    # A car overlapping the ego by 0.3 m at t = 0 (centres 4.2 m apart, both 4.5 m
+    # long) and 8 m/s faster: the touch is the present, which no plan changes; braking
+    # or keeping 10 m/s never meets its predicted mean after t = 0.
+    car = RoadUser(
+        1, RoadUserType.CAR, KinematicState(EGO_SHAPE.length - 0.3, 0.0, 0.0, 18.0), Shape(4.5, 1.8)
+    )
+    config = preset("standard").with_overrides({"weights": {"jerk_lon": 0.0, "jerk_lat": 0.0}})
+    decision = Planner(config, STRAIGHT).plan(KinematicState(0, 0, 0, 10.0), [car])
+    # Level 3 at least (the risk, Eq. 3, still takes the present touch into its maximum,
+    # which R_max refuses alike for every candidate); judging t = 0 made every one level 1.
+    assert decision.level >= Validity.ABOVE_MAX_RISK
+    assert decision.level_counts.get(int(Validity.COLLISION), 0) < sum(decision.level_counts.values()) // 2
