@@ -23,6 +23,8 @@ import numpy as np
 from harm_calibration.calibration import (
     MIN_IMPACT_DV_MS,
     REFERENCES,
+    SPEED_TABLE_SPEEDS,
+    SPEED_VERDICTS,
     done_checks,
     error_stats,
     held_back_evaluation,
@@ -206,7 +208,12 @@ def headline_markdown(summary: dict[str, Any], key: str = "by_partner") -> str:
     return "\n".join(lines)
 
 
-def _range(stat: dict[str, float]) -> str:
+def _range(stat: dict[str, float], pct: bool = True) -> str:
+    """'median (min-max)' over the splits; '-' without a value."""
+    if not math.isfinite(stat["median"]):
+        return "-"
+    if not pct:
+        return f"{stat['median']:.0f} ({stat['min']:.0f}-{stat['max']:.0f})"
     return f"{_fmt(stat['median'], True)} ({_fmt(stat['min'], True)}-{_fmt(stat['max'], True)})"
 
 
@@ -221,14 +228,13 @@ def held_back_markdown(evaluation: dict[str, Any]) -> str:
         f"the same angle x offset bin (bins with fewer than {evaluation['min_count']} training impacts have "
         "no factor; their test impacts are counted below, not scored).",
         "",
-        "| group | n test | Eq. 1 median | Eq. 1 p95 | planar median | planar p95 | correction median "
-        "| correction p95 |",
+        "| group | n test (range) | Eq. 1 median | Eq. 1 p95 | planar median | planar p95 "
+        "| correction median | correction p95 |",
         "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for group, models in evaluation["groups"].items():
-        n = models["eq1"]["n"]["median"]
         lines.append(
-            f"| {group} | {n:.0f} | {_range(models['eq1']['median_abs'])} "
+            f"| {group} | {_range(models['eq1']['n'], pct=False)} | {_range(models['eq1']['median_abs'])} "
             f"| {_range(models['eq1']['p95_abs'])} "
             f"| {_range(models['planar']['median_abs'])} | {_range(models['planar']['p95_abs'])} "
             f"| {_range(models['correction']['median_abs'])} | {_range(models['correction']['p95_abs'])} |"
@@ -285,27 +291,48 @@ def harm_markdown(harm: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def speed_markdown(check: dict[str, Any]) -> str:
-    """Markdown of the speed check."""
+def speed_markdown(check: dict[str, Any], only_flagged: bool = False) -> str:
+    """Markdown of the speed check: counts per restitution setting, then a row per cell.
+
+    Args:
+        check: ``calibration.speed_independence`` result.
+        only_flagged: list only the cells whose ratio varies by the limit or more.
+    """
+    speeds = [f"{v:g}" for v in SPEED_TABLE_SPEEDS]
     lines = [
-        f"Ratio measured / Eq. 1 across closing speeds {check['speeds'][0]:g}-{check['speeds'][1]:g} m/s per "
-        f"geometry cell ({', '.join(check['partners'])}); a cell is flagged at a variation "
-        "(max / min - 1) of "
-        f"{100 * check['limit']:.0f}% or more; 'unexplained' = flagged without a multi-impact sequence.",
+        f"Ratio measured / Eq. 1 (the ego's delta-v over the whole sequence) across closing speeds "
+        f"{check['speeds'][0]:g}-{check['speeds'][1]:g} m/s per geometry cell "
+        f"({', '.join(check['partners'])}); spread = max / min - 1 over the speeds, flagged at "
+        f"{100 * check['limit']:.0f}% or more. Verdicts: "
+        + "; ".join(f"*{v}*: {text}" for v, text in SPEED_VERDICTS.items())
+        + ".",
         "",
-        "| restitution | cells | flagged | unexplained | largest variation |",
-        "| --- | ---: | ---: | ---: | ---: |",
+        "| restitution | cells | " + " | ".join(SPEED_VERDICTS) + " | largest spread |",
+        "| --- | ---: |" + " ---: |" * (len(SPEED_VERDICTS) + 1),
     ]
     for rset, s in check["by_restitution_set"].items():
-        lines.append(
-            f"| {rset} | {s['n_cells']} | {s['flagged']} | {s['unexplained']} "
-            f"| {_fmt(s['max_variation'], True)} |"
+        counts = " | ".join(str(s[v]) for v in SPEED_VERDICTS)
+        lines.append(f"| {rset} | {s['n_cells']} | {counts} | {_fmt(s['max_variation'], True)} |")
+    cells = check["flagged"] if only_flagged else check["cells"]
+    if not cells:
+        return "\n".join(lines)
+    lines += [
+        "",
+        "| cell | restitution | " + " | ".join(f"{v} m/s" for v in speeds)
+        + " | spread | spread, single impulses | spread of measured / planar | impulses | verdict |",
+        "| --- | --- |" + " ---: |" * (len(speeds) + 3) + " --- | --- |",
+    ]  # fmt: skip
+    for c in cells:
+        ratios = " | ".join(_fmt(c["ratio"].get(v)) for v in speeds)
+        impulses = "/".join(
+            "-" if not isinstance(n, float | int) or not math.isfinite(n) else f"{n:.0f}"
+            for n in (c["impulses"].get(v) for v in speeds)
         )
-    if check["unexplained"]:
-        lines += ["", "Unexplained cells: " + "; ".join(
-            f"{c['cell']} ({c['restitution_set']}): {_fmt(c['variation'], True)}"
-            for c in check["unexplained"][:10]
-        )]  # fmt: skip
+        lines.append(
+            f"| {c['cell']} | {c['restitution_set']} | {ratios} | {_fmt(c['variation'], True)} "
+            f"| {_fmt(c['variation_single'], True)} | {_fmt(c['variation_planar'], True)} "
+            f"| {impulses} | {c['verdict']} |"
+        )
     return "\n".join(lines)
 
 

@@ -18,7 +18,8 @@ silently predicted by Eq. 1).
 ``speed_independence`` checks the measurement itself: for a fixed geometry, rigid-body
 mechanics gives a ratio measured / Eq. 1 that does not depend on the closing speed (at
 constant restitution), so a cell whose ratio varies by 10 % or more over the closing
-speeds is listed, with its multi-impact flag.
+speeds is listed with its cause: a multi-impact sequence at some speeds, the
+speed-dependent restitution law (then measured / planar model stays put), or none.
 """
 
 from __future__ import annotations
@@ -135,8 +136,16 @@ class BinCorrection:
         return eq1 * self.factors[bins]
 
 
+#: Prefix of the reporting groups that split a partner's impacts by sequence type.
+PARTNER_SEQUENCE = "partner and sequence:"
+
+
 def _groups(rows: Sequence[Row]) -> dict[str, np.ndarray]:
-    """Masks of the reporting groups: all, per class, per partner."""
+    """Masks of the reporting groups.
+
+    All; per class; per partner; per sequence type (single impulse or multi-impact); per
+    partner and sequence type.
+    """
     classes = np.array([r["class"] for r in rows], dtype=object)
     partners = np.array([r["partner"] for r in rows], dtype=object)
     multi = np.array([r.get("multi_impact") == "yes" for r in rows])
@@ -147,6 +156,9 @@ def _groups(rows: Sequence[Row]) -> dict[str, np.ndarray]:
         out[f"partner:{p}"] = partners == p
     out["sequence:single impulse"] = ~multi
     out["sequence:multi-impact"] = multi
+    for p in sorted(set(partners)):
+        out[f"{PARTNER_SEQUENCE}{p}, single impulse"] = (partners == p) & ~multi
+        out[f"{PARTNER_SEQUENCE}{p}, multi-impact"] = (partners == p) & multi
     return out
 
 
@@ -274,13 +286,39 @@ def done_checks(evaluation: dict[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
+#: Closing speeds [m/s] whose ratios the per-cell speed table shows.
+SPEED_TABLE_SPEEDS = (5.0, 10.0, 20.0, 30.0)
+#: Verdicts of a cell in the speed check, in the order they are tried.
+SPEED_VERDICTS = {
+    "steady": "measured / Eq. 1 varies by less than the limit",
+    "multi-impact": "it varies, but not over the closing speeds whose sequence is a single impulse",
+    "restitution law": "it varies, but measured / planar model (which takes the same e(v)) does not: "
+    "the speed-dependent restitution, by design",
+    "unexplained": "none of the above",
+}
+
+
+def _variation(ratio: np.ndarray) -> float:
+    """Largest over smallest, minus 1, of the finite positive ratios; nan with fewer than two."""
+    ratio = ratio[np.isfinite(ratio) & (ratio > 0)]
+    return float(ratio.max() / ratio.min() - 1.0) if ratio.size >= 2 else math.nan
+
+
 def speed_independence(
     rows: Sequence[Row],
     partners: Sequence[str] = ("car", "truck", "bus"),
     speeds: tuple[float, float] = (5.0, 30.0),
     limit: float = SPEED_VARIATION_LIMIT,
 ) -> dict[str, Any]:
-    """Variation of measured / Eq. 1 across closing speeds, per geometry cell.
+    """Variation of measured / Eq. 1 across closing speeds, per geometry cell, and its cause.
+
+    Rigid-body mechanics at a constant restitution gives a ratio that does not depend on
+    the closing speed (velocities scale, the geometry does not). A cell whose ratio varies
+    by ``limit`` or more gets a verdict (``SPEED_VERDICTS``): ``multi-impact`` if the
+    closing speeds with a single-impulse sequence vary by less than the limit among
+    themselves; ``restitution law`` if measured / planar model varies by less than the
+    limit (the planar model takes the world's e(v) at the same normal closing speed, so its
+    ratio to Eq. 1 moves with e(v) only); otherwise ``unexplained``.
 
     Args:
         rows: measured sweep rows (with ``cell`` and ``closing_speed``).
@@ -289,9 +327,11 @@ def speed_independence(
         limit: variation (max / min - 1) that flags a cell.
 
     Returns:
-        ``n_cells``, ``flagged`` (cells at or over the limit), ``unexplained`` (flagged
-        without any multi-impact or multi-body impact), the largest variation, and per
-        restitution setting the same counts.
+        ``cells``: per (restitution setting, cell): ``ratio`` (measured / Eq. 1 of the whole
+        sequence) and ``impulses`` per closing speed (keys as ``f"{v:g}"``), ``variation``,
+        ``variation_single`` (single-impulse speeds only), ``variation_planar`` (measured /
+        planar), ``multi_impact``, ``verdict``; ``flagged`` and ``unexplained`` (those
+        cells), the largest variation, and per restitution setting the counts per verdict.
     """
     by_cell: dict[tuple[str, str], list[Row]] = {}
     for r in rows:
@@ -299,33 +339,46 @@ def speed_independence(
             by_cell.setdefault((r["restitution_set"], r["cell"]), []).append(r)
     cells = []
     for (rset, cell), group in sorted(by_cell.items()):
-        if len(group) < 2:
+        group = sorted(group, key=lambda r: r["closing_speed"])
+        measured = column(group, "dv_measured_a")
+        ratio = measured / column(group, "dv_predicted_a")
+        variation = _variation(ratio)
+        if not math.isfinite(variation):
             continue
-        ratio = column(group, "dv_measured_a") / column(group, "dv_predicted_a")
-        ratio = ratio[np.isfinite(ratio) & (ratio > 0)]
-        if ratio.size < 2:
-            continue
-        variation = float(ratio.max() / ratio.min() - 1.0)
-        multi = any(r.get("multi_impact") == "yes" for r in group)
+        single = np.array([r.get("multi_impact") != "yes" for r in group])
+        variation_single = _variation(ratio[single])
+        variation_planar = _variation(measured / column(group, "dv_planar_a"))
+        if variation < limit:
+            verdict = "steady"
+        elif not (variation_single >= limit):  # also with fewer than two single-impulse speeds
+            verdict = "multi-impact"
+        elif variation_planar < limit:
+            verdict = "restitution law"
+        else:
+            verdict = "unexplained"
         cells.append(
             {
                 "restitution_set": rset,
                 "cell": cell,
+                "ratio": {f"{r['closing_speed']:g}": float(x) for r, x in zip(group, ratio, strict=True)},
+                "impulses": {f"{r['closing_speed']:g}": r.get("n_impulses") for r in group},
                 "variation": variation,
-                "multi_impact": multi,
-                "ratio_min": float(ratio.min()),
-                "ratio_max": float(ratio.max()),
+                "variation_single": variation_single,
+                "variation_planar": variation_planar,
+                "multi_impact": bool(not single.all()),
+                "verdict": verdict,
+                "ratio_min": float(np.nanmin(ratio)),
+                "ratio_max": float(np.nanmax(ratio)),
             }  # fmt: skip
         )
-    flagged = [c for c in cells if c["variation"] >= limit]
-    unexplained = [c for c in flagged if not c["multi_impact"]]
+    flagged = [c for c in cells if c["verdict"] != "steady"]
     per_set = {}
     for rset in sorted({c["restitution_set"] for c in cells}):
         in_set = [c for c in cells if c["restitution_set"] == rset]
         per_set[rset] = {
             "n_cells": len(in_set),
-            "flagged": sum(c["variation"] >= limit for c in in_set),
-            "unexplained": sum(c["variation"] >= limit and not c["multi_impact"] for c in in_set),
+            "flagged": sum(c["verdict"] != "steady" for c in in_set),
+            **{v: sum(c["verdict"] == v for c in in_set) for v in SPEED_VERDICTS},
             "max_variation": max((c["variation"] for c in in_set), default=math.nan),
         }
     return {
@@ -333,8 +386,9 @@ def speed_independence(
         "speeds": list(speeds),
         "partners": list(partners),
         "n_cells": len(cells),
+        "cells": cells,
         "flagged": flagged,
-        "unexplained": unexplained,
+        "unexplained": [c for c in flagged if c["verdict"] == "unexplained"],
         "max_variation": max((c["variation"] for c in cells), default=math.nan),
         "by_restitution_set": per_set,
     }
@@ -348,6 +402,9 @@ __all__ = [
     "MODELS",
     "REFERENCES",
     "OFFSET_EDGES",
+    "PARTNER_SEQUENCE",
+    "SPEED_TABLE_SPEEDS",
+    "SPEED_VERDICTS",
     "BinCorrection",
     "bin_index",
     "done_checks",

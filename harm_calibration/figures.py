@@ -198,8 +198,10 @@ def held_back(out_dir: Path, summary: dict[str, Any], which: str = "held_back") 
     ``which``: ``held_back`` (error against the whole sequence) or ``held_back_first_impulse``.
     """
     plt = _pyplot()
+    from harm_calibration.calibration import PARTNER_SEQUENCE
+
     groups = summary[which]["groups"]
-    names = list(groups)
+    names = [g for g in groups if not g.startswith(PARTNER_SEQUENCE)]  # those are in report.md
     models = (("eq1", "Eq. 1"), ("planar", "planar"), ("correction", "correction"))
     legend = {"Eq. 1": "Eq. 1", "planar": "planar impulse model",
               "correction": "Eq. 1 x angle-offset factor (retired)"}  # fmt: skip
@@ -234,35 +236,38 @@ def held_back(out_dir: Path, summary: dict[str, Any], which: str = "held_back") 
     return _save(fig, out_dir, which)
 
 
-def speed_ratio(out_dir: Path, rows: Sequence[Row]) -> str:
-    """Measured / Eq. 1 against the closing speed for every vehicle cell, a panel per partner."""
-    from harm_calibration.calibration import SPEED_VARIATION_LIMIT
+#: Line style of a cell in the speed figure, per ``calibration.SPEED_VERDICTS`` verdict.
+_VERDICT_STYLE = {
+    "steady": {"lw": 0.7, "alpha": 0.8, "zorder": 2},
+    "multi-impact": {"color": "#999999", "lw": 0.6, "ls": "--", "alpha": 0.7, "zorder": 1},
+    "restitution law": {"color": "#555555", "lw": 1.0, "ls": ":", "zorder": 2},
+    "unexplained": {"color": "black", "lw": 1.4, "zorder": 3},
+}
 
+
+def speed_ratio(out_dir: Path, check: dict[str, Any]) -> str:
+    """Measured / Eq. 1 against the closing speed for every vehicle cell, a panel per partner.
+
+    Args:
+        out_dir: output folder.
+        check: ``calibration.speed_independence`` result (cells with ratios and verdicts).
+    """
     plt = _pyplot()
-    partners = [p for p in ("car", "truck", "bus") if any(r["partner"] == p for r in rows)]
-    vehicles = [r for r in rows if r.get("cell") and r["partner"] in partners]
-    sets = sorted({r["restitution_set"] for r in vehicles})
+    cells = check["cells"]
+    partners = [p for p in check["partners"] if any(c["cell"].split("|")[0] == p for c in cells)]
+    sets = sorted({c["restitution_set"] for c in cells})
     fig, axes = plt.subplots(len(sets), len(partners), figsize=(2.6 * len(partners), 2.6 * len(sets)),
                              sharex=True, sharey=True, squeeze=False)  # fmt: skip
     for row_axes, rset in zip(axes, sets, strict=True):
         for ax, partner in zip(row_axes, partners, strict=True):
-            in_p = [r for r in vehicles if r["restitution_set"] == rset and r["partner"] == partner]
-            for cell in sorted({r["cell"] for r in in_p}):
-                group = sorted((r for r in in_p if r["cell"] == cell), key=lambda r: r["closing_speed"])
-                ratio = column(group, "dv_measured_a") / column(group, "dv_predicted_a")
-                ok = np.isfinite(ratio) & (ratio > 0)
-                if ok.sum() < 2:
+            for c in cells:
+                if c["restitution_set"] != rset or c["cell"].split("|")[0] != partner:
                     continue
-                multi = any(r.get("multi_impact") == "yes" for r in group)
-                flagged = ratio[ok].max() / ratio[ok].min() - 1.0 >= SPEED_VARIATION_LIMIT
-                speed = column(group, "closing_speed")
-                if multi:
-                    style = {"color": "#999999", "lw": 0.6, "ls": "--", "alpha": 0.7, "zorder": 1}
-                elif flagged:
-                    style = {"color": "black", "lw": 1.4, "zorder": 3}
-                else:
-                    style = {"color": _colour(partner), "lw": 0.7, "alpha": 0.8, "zorder": 2}
-                ax.plot(speed[ok], ratio[ok], **style)
+                speed = np.array([float(v) for v in c["ratio"]])
+                ratio = np.array(list(c["ratio"].values()), dtype=float)
+                order = np.argsort(speed)
+                style = {"color": _colour(partner)} | _VERDICT_STYLE[c["verdict"]]
+                ax.plot(speed[order], ratio[order], **style)
             title = partner + (f", restitution {rset}" if len(sets) > 1 else "")
             ax.set_title(title, color=_colour(partner))
             ax.grid(True, lw=0.3, alpha=0.5)
@@ -271,14 +276,23 @@ def speed_ratio(out_dir: Path, rows: Sequence[Row]) -> str:
         ax.set_xlabel("closing speed [m/s]")
     for ax in axes[:, 0]:
         ax.set_ylabel("measured / Eq. 1 delta-v\nof the ego (whole sequence)")
+    labels = {
+        "steady": f"steady: spread below {check['limit']:.0%} (partner colour)",
+        "multi-impact": "multi-impact: steady over the single-impulse speeds",
+        "restitution law": "restitution law: measured / planar model steady",
+        "unexplained": "unexplained",
+    }
     handles = [
-        plt.Line2D([], [], color="#555555", lw=0.9, label="cell with single impacts (partner colour)"),
-        plt.Line2D([], [], color="black", lw=1.4,
-                   label=f"varies by {SPEED_VARIATION_LIMIT:.0%} or more, no multi-impact"),
-        plt.Line2D([], [], color="#999999", lw=0.6, ls="--", label="cell with a multi-impact sequence"),
-    ]  # fmt: skip
-    fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.0), frameon=False, ncol=1)
-    fig.suptitle("Speed independence: one line per geometry cell (angle, offset)", y=1.0)
+        plt.Line2D([], [], **({"color": "#555555"} | style), label=labels[verdict])
+        for verdict, style in _VERDICT_STYLE.items()
+    ]
+    fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 0.0), frameon=False, ncol=1,
+               fontsize="small")  # fmt: skip
+    fig.suptitle(
+        f"Speed independence: one line per geometry cell (angle, offset); flagged at "
+        f"{check['limit']:.0%} spread",
+        y=1.0,
+    )
     fig.tight_layout()
     return _save(fig, out_dir, "speed_ratio")
 
@@ -297,8 +311,8 @@ def write_figures(out_dir: Path, rows: Sequence[Row], summary: dict[str, Any]) -
     for key in ("held_back", "held_back_first_impulse"):
         if key in summary:
             names.append(held_back(out_dir, summary, key))
-    if any(r.get("cell") and r["partner"] in ("car", "truck", "bus") for r in good):
-        names.append(speed_ratio(out_dir, good))
+    if summary.get("speed_independence", {}).get("cells"):
+        names.append(speed_ratio(out_dir, summary["speed_independence"]))
     return names
 
 

@@ -123,20 +123,36 @@ def test_held_back_evaluation_rejects_bad_input():
         held_back_evaluation(synthetic_rows(np.random.default_rng(0), n_cells=1))
 
 
-def test_speed_independence_flags_cells_and_multi_impacts():
-    rows = synthetic_rows(np.random.default_rng(2), n_cells=9)
+def test_speed_independence_flags_cells_and_names_the_cause():
+    rows = synthetic_rows(np.random.default_rng(2), n_cells=12)
     steady = speed_independence(rows, partners=("car", "truck"))
-    assert steady["n_cells"] == 6 and not steady["flagged"] and steady["max_variation"] < 0.1
-    # One cell's ratio grows with speed (a measurement artefact), another is multi-impact.
+    assert steady["n_cells"] == 8 and not steady["flagged"] and steady["max_variation"] < 0.1
+    assert {c["verdict"] for c in steady["cells"]} == {"steady"}
     cells = sorted({r["cell"] for r in rows if r["partner"] == "car"})
     for r in rows:
-        if r["cell"] == cells[0]:
-            r["dv_measured_a"] = r["dv_predicted_a"] * (1.0 + 0.02 * r["closing_speed"])
-        if r["cell"] == cells[1]:
-            r["dv_measured_a"] *= 1.0 + 0.01 * r["closing_speed"]
-            r["multi_impact"] = "yes" if r["closing_speed"] == 30.0 else "no"
+        v = r["closing_speed"]
+        if r["cell"] == cells[0]:  # a measurement artefact: the ratio grows with speed
+            r["dv_measured_a"] = r["dv_predicted_a"] * (1.0 + 0.02 * v)
+        if r["cell"] == cells[1]:  # grows only where a second hit joins the sequence
+            r["multi_impact"] = "yes" if v >= 20.0 else "no"
+            r["dv_measured_a"] *= 1.5 if v >= 20.0 else 1.0
+        if r["cell"] == cells[2]:  # grows at speeds 5-20 without a second hit: not explained
+            r["multi_impact"] = "yes" if v == 30.0 else "no"
+            r["dv_measured_a"] *= 1.0 + 0.01 * v
+        if r["cell"] == cells[3]:  # restitution falling with speed, which the planar model takes too
+            e = 0.1 + 0.5 * math.exp(-v / 6.0)
+            r["dv_measured_a"] = r["dv_predicted_a"] * (1.0 + e)
+            r["dv_planar_a"] = r["dv_measured_a"] * 0.97
     check = speed_independence(rows, partners=("car", "truck"))
-    assert {c["cell"] for c in check["flagged"]} == {cells[0], cells[1]}
-    assert [c["cell"] for c in check["unexplained"]] == [cells[0]]
-    assert check["unexplained"][0]["variation"] == pytest.approx(1.6 / 1.1 - 1, rel=0.05)
-    assert math.isclose(check["by_restitution_set"]["default"]["flagged"], 2)
+    verdicts = {c["cell"]: c["verdict"] for c in check["cells"]}
+    expected = ["unexplained", "multi-impact", "unexplained", "restitution law"]
+    assert [verdicts[c] for c in cells[:4]] == expected
+    assert {c["cell"] for c in check["flagged"]} == set(cells[:4])
+    assert {c["cell"] for c in check["unexplained"]} == {cells[0], cells[2]}
+    first = next(c for c in check["cells"] if c["cell"] == cells[0])
+    assert first["variation"] == pytest.approx(1.6 / 1.1 - 1, rel=0.05)
+    assert first["ratio"]["5"] == pytest.approx(1.1, rel=0.01) and first["ratio"]["30"] == pytest.approx(1.6)
+    counts = check["by_restitution_set"]["default"]
+    assert (counts["flagged"], counts["unexplained"], counts["multi-impact"], counts["restitution law"]) == (
+        4, 2, 1, 1,
+    )  # fmt: skip

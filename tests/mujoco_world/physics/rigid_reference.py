@@ -107,18 +107,24 @@ def contacts(a, b):
     return out
 
 
-def collide(a, b, e_of_speed, mu, k=8e8, dt=2e-6, t_max=0.05, v_eps=0.02, law="hysteretic"):
-    """Integrate until the bodies have separated; return the total impulse on b and the log.
+def collide(
+    a, b, e_of_speed, mu, k=8e8, dt=2e-6, t_max=0.05, v_eps=0.02, law="hysteretic", apart=0.001, dt_free=None
+):
+    """Integrate until the bodies have separated; return the total impulse on b.
 
     Args:
         e_of_speed: restitution as a function of the normal closing speed at first touch.
         mu: Coulomb friction coefficient.
+        apart: time without contact that ends the integration [s] (0.001: the first
+            impulse; longer: later hits of the free bodies join, the whole sequence).
+        dt_free: step while no point touches [s] (default ``dt``).
     """
     state = {}
     impulse_b = np.zeros(2)
     t = 0.0
     touched = False
-    quiet = 0
+    quiet = 0.0
+    step = dt
     while t < t_max:
         fa, fb = np.zeros(2), np.zeros(2)
         ta = tb = 0.0
@@ -152,18 +158,19 @@ def collide(a, b, e_of_speed, mu, k=8e8, dt=2e-6, t_max=0.05, v_eps=0.02, law="h
         for key in list(state):
             if key not in keys:
                 del state[key]
+        step = dt if active or dt_free is None else dt_free
         if active:
             touched = True
-            quiet = 0
+            quiet = 0.0
         elif touched:
-            quiet += 1
-            if quiet > int(0.001 / dt):
-                break  # the first impulse is over (1 ms without contact)
-        impulse_b += fb * dt
+            quiet += step
+            if quiet > apart:
+                break  # apart long enough: the first impulse (or the sequence) is over
+        impulse_b += fb * step
         for body, f, tq in ((a, fa, ta), (b, fb, tb)):
-            body.v = body.v + f / body.m * dt
-            body.w = body.w + tq / body.inertia * dt
-            body.p = body.p + body.v * dt
-            body.yaw += body.w * dt
-        t += dt
+            body.v = body.v + f / body.m * step
+            body.w = body.w + tq / body.inertia * step
+            body.p = body.p + body.v * step
+            body.yaw += body.w * step
+        t += step
     return impulse_b

@@ -1,0 +1,105 @@
+"""Multi-impact sequences: what a sequence-aware prediction would have to reproduce.
+
+For every vehicle impact of an ``etp impacts`` table whose sequence is flagged
+``multi_impact``, the ego's delta-v (|J| / m) four ways:
+
+* measured in the rigid mode as the sweep does it (bodies skid at the tyre limit between
+  impulses), over the whole sequence and its first impulse;
+* measured with coasting bodies (no tyre forces between impulses);
+* the independent rigid-body reference (``tests/mujoco_world/physics/rigid_reference.py``,
+  no MuJoCo) integrated over the whole sequence of the *free* bodies, until they have been
+  apart for 0.3 s: the ideal of a sequence-aware planar model (impulse, free motion with
+  the post-impact spin, a re-check for a second contact, its impulse, ...);
+* the planar impulse model (first contact only) and paper Eq. 1.
+
+Run: python benchmarks/impact_sequences.py logs/small_rigid/impacts.csv
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+from ethical_planner.impulse import RestitutionLaw
+from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, RoadUserType
+from harm_calibration.rows import read_rows
+from harm_calibration.sweep import ImpactCase, contact_for, ego_proxy, launch_case, restitution_for
+from mujoco_world.physics.impact import ImpactRig
+from mujoco_world.physics.scene import BodyProxy
+
+TESTS = Path(__file__).resolve().parents[1] / "tests" / "mujoco_world" / "physics"
+VEHICLES = ("car", "truck", "bus")
+
+
+def _reference():  # noqa: ANN202 - a module
+    spec = importlib.util.spec_from_file_location("rigid_reference", TESTS / "rigid_reference.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _stats(errors: list[float]) -> str:
+    e = np.abs(np.array(errors))
+    return f"median {100 * np.median(e):.1f} %, p95 {100 * np.percentile(e, 95):.1f} %"
+
+
+def main() -> None:
+    """Print the table and the summary."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("impacts", type=Path, help="impacts.csv of etp impacts --grid small|full")
+    args = parser.parse_args()
+    rows = [
+        r for r in read_rows(args.impacts)
+        if r["status"] == "ok" and r["partner"] in VEHICLES and r.get("multi_impact") == "yes"
+    ]  # fmt: skip
+    reference = _reference()
+    coasting: dict[tuple[str, str], ImpactRig] = {}
+    print(
+        "| impact | impulses | measured first | measured sequence | coasting sequence "
+        "| free rigid bodies (reference) | planar | Eq. 1 |"
+    )
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    err = {"planar": [], "eq1": [], "reference": [], "reference_coasting": [], "coasting": []}
+    for r in rows:
+        case = ImpactCase(r["partner"], r["closing_speed"], r["angle_deg"], r["offset"], r["restitution_set"])
+        key = (case.partner, case.restitution_set)
+        if key not in coasting:
+            partner = BodyProxy.of_type("partner", case.partner)
+            contact = contact_for(case.restitution_set)
+            coasting[key] = ImpactRig(ego_proxy(), partner, contact=contact, brake=False)
+        m = launch_case(case, coasting[key])
+        if m is None:
+            continue
+        shape = DEFAULT_SHAPES[RoadUserType(case.partner)]
+        a = reference.Body(m.a.mass, EGO_SHAPE.length, EGO_SHAPE.width, *m.a.position, m.a.yaw, *m.a.velocity)
+        b = reference.Body(m.b.mass, shape.length, shape.width, *m.b.position, m.b.yaw, *m.b.velocity)
+        law: RestitutionLaw = restitution_for(case.restitution_set)
+        impulse = reference.collide(
+            a, b, law, contact_for(case.restitution_set).friction, law="hunt_crossley", t_max=2.0,
+            apart=0.3, dt_free=2e-5,
+        )  # fmt: skip
+        ref = float(np.hypot(*impulse)) / m.a.mass
+        measured = r["dv_measured_a"]
+        err["planar"].append((measured - r["dv_planar_a"]) / r["dv_planar_a"])
+        err["eq1"].append((measured - r["dv_predicted_a"]) / r["dv_predicted_a"])
+        err["reference"].append((measured - ref) / ref)
+        err["reference_coasting"].append((m.a.dv_impulse - ref) / ref)
+        err["coasting"].append((measured - m.a.dv_impulse) / m.a.dv_impulse)
+        print(
+            f"| {case.id} | {r['n_impulses']:.0f} | {r['dv_first_a']:.2f} | {measured:.2f} "
+            f"| {m.a.dv_impulse:.2f} | {ref:.2f} | {r['dv_planar_a']:.2f} | {r['dv_predicted_a']:.2f} |"
+        )
+    print()
+    print(f"{len(err['planar'])} multi-impact vehicle sequences; |measured sequence - model| / model:")
+    print(f"- planar model (first contact): {_stats(err['planar'])}")
+    print(f"- Eq. 1: {_stats(err['eq1'])}")
+    print(f"- free rigid bodies over the whole sequence: {_stats(err['reference'])}")
+    print(f"- coasting measurement against the free rigid bodies: {_stats(err['reference_coasting'])}")
+    print(f"- skidding against coasting measurement: {_stats(err['coasting'])}")
+
+
+if __name__ == "__main__":
+    main()
