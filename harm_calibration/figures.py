@@ -290,7 +290,7 @@ def speed_ratio(out_dir: Path, check: dict[str, Any]) -> str:
                fontsize="small")  # fmt: skip
     fig.suptitle(
         f"Speed independence: one line per geometry cell (angle, offset); flagged at "
-        f"{check['limit']:.0%} spread",
+        f"{check['limit']:.0%} spread" + (f"; restitution {sets[0]}" if len(sets) == 1 else ""),
         y=1.0,
     )
     fig.tight_layout()
