@@ -96,6 +96,25 @@ def test_held_back_evaluation_splits_by_cell_and_reports_every_split():
     assert checks["all"]["median_halved"] and checks["all"]["p95_no_worse"]
 
 
+def test_held_back_groups_split_each_partner_by_sequence_type():
+    rows = synthetic_rows(np.random.default_rng(3))
+    # Every truck impact at 30 m/s is a multi-impact sequence whose measurement doubles.
+    for r in rows:
+        if r["partner"] == "truck" and r["closing_speed"] == 30.0:
+            r["multi_impact"] = "yes"
+            r["dv_measured_a"] *= 2.0
+    groups = held_back_evaluation(rows, seeds=range(5))["groups"]
+    single, multi = (
+        groups["partner and sequence:truck, single impulse"],
+        groups["partner and sequence:truck, multi-impact"],
+    )
+    # Whole cells are held back: a quarter of a truck's held-back impacts are its 30 m/s ones.
+    assert multi["planar"]["n"]["median"] * 3 == single["planar"]["n"]["median"]
+    assert multi["planar"]["median_abs"]["median"] == pytest.approx(1.0, abs=0.05)
+    assert single["planar"]["median_abs"]["median"] < 0.03
+    assert groups["partner and sequence:car, multi-impact"]["planar"]["n"]["median"] == 0
+
+
 def test_held_back_evaluation_reports_unseen_bins():
     rows = synthetic_rows(np.random.default_rng(1))
     # One bin that exists in a single cell only: whenever that cell is held back it is unseen.
