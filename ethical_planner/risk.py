@@ -336,6 +336,9 @@ def risk_detail(
     Every triple that passes the gate is integrated (``prediction_collision_probability``);
     the harms are those of ``assess_risk``, so the maximum over t of p H equals its R.
     """
+    if prediction.n_obs == 0:
+        empty = np.zeros((0, candidates.t.size))
+        return RiskDetail(empty, empty.copy(), empty.copy())
     rows = np.array([index])
     p = prediction_collision_probability(
         candidates, prediction, ego_shape, config.gate_sigmas, Workers(1), rows
@@ -386,6 +389,8 @@ def _triple_harms(
     """
     n_t = candidates.t.size
     k = prediction.n_obs
+    if flat.size == 0:
+        return np.zeros(0), np.zeros(0)
     if config.delta_v_model is DeltaVModel.EQ1:
         yaw, speed = candidates.yaw[rows], candidates.v[rows]
         ego = np.stack(
