@@ -319,8 +319,9 @@ def speed_markdown(check: dict[str, Any], only_flagged: bool = False) -> str:
     lines += [
         "",
         "| cell | restitution | " + " | ".join(f"{v} m/s" for v in speeds)
-        + " | spread | spread, single impulses | spread of measured / planar | impulses | verdict |",
-        "| --- | --- |" + " ---: |" * (len(speeds) + 3) + " --- | --- |",
+        + " | spread | spread, single impulses | spread of measured / planar "
+        "| spread of first impulse / planar | impulses | verdict |",
+        "| --- | --- |" + " ---: |" * (len(speeds) + 4) + " --- | --- |",
     ]  # fmt: skip
     for c in cells:
         ratios = " | ".join(_fmt(c["ratio"].get(v)) for v in speeds)
@@ -331,7 +332,7 @@ def speed_markdown(check: dict[str, Any], only_flagged: bool = False) -> str:
         lines.append(
             f"| {c['cell']} | {c['restitution_set']} | {ratios} | {_fmt(c['variation'], True)} "
             f"| {_fmt(c['variation_single'], True)} | {_fmt(c['variation_planar'], True)} "
-            f"| {impulses} | {c['verdict']} |"
+            f"| {_fmt(c['variation_first'], True)} | {impulses} | {c['verdict']} |"
         )
     return "\n".join(lines)
 

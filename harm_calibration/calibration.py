@@ -330,7 +330,8 @@ def speed_independence(
         ``cells``: per (restitution setting, cell): ``ratio`` (measured / Eq. 1 of the whole
         sequence) and ``impulses`` per closing speed (keys as ``f"{v:g}"``), ``variation``,
         ``variation_single`` (single-impulse speeds only), ``variation_planar`` (measured /
-        planar), ``multi_impact``, ``verdict``; ``flagged`` and ``unexplained`` (those
+        planar), ``variation_first`` (the first impulse / planar: where it is small, the
+        later hits carry the variation), ``multi_impact``, ``verdict``; ``flagged`` and ``unexplained`` (those
         cells), the largest variation, and per restitution setting the counts per verdict.
     """
     by_cell: dict[tuple[str, str], list[Row]] = {}
@@ -348,6 +349,7 @@ def speed_independence(
         single = np.array([r.get("multi_impact") != "yes" for r in group])
         variation_single = _variation(ratio[single])
         variation_planar = _variation(measured / column(group, "dv_planar_a"))
+        variation_first = _variation(column(group, "dv_first_a") / column(group, "dv_planar_a"))
         if variation < limit:
             verdict = "steady"
         elif not (variation_single >= limit):  # also with fewer than two single-impulse speeds
@@ -365,6 +367,7 @@ def speed_independence(
                 "variation": variation,
                 "variation_single": variation_single,
                 "variation_planar": variation_planar,
+                "variation_first": variation_first,
                 "multi_impact": bool(not single.all()),
                 "verdict": verdict,
                 "ratio_min": float(np.nanmin(ratio)),

@@ -171,6 +171,9 @@ def test_speed_independence_flags_cells_and_names_the_cause():
     first = next(c for c in check["cells"] if c["cell"] == cells[0])
     assert first["variation"] == pytest.approx(1.6 / 1.1 - 1, rel=0.05)
     assert first["ratio"]["5"] == pytest.approx(1.1, rel=0.01) and first["ratio"]["30"] == pytest.approx(1.6)
+    # The multi-impact cell's first impulse (dv_first_a, untouched above) stays with the planar model.
+    second = next(c for c in check["cells"] if c["cell"] == cells[1])
+    assert second["variation_first"] < 0.1 < second["variation_planar"]
     counts = check["by_restitution_set"]["default"]
     assert (counts["flagged"], counts["unexplained"], counts["multi-impact"], counts["restitution law"]) == (
         4, 2, 1, 1,
