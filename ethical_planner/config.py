@@ -554,6 +554,45 @@ class TrafficRulesConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class TerminalConfig:
+    """Terminal safety: a plan must not end in oncoming traffic's way too late to get out.
+
+    ``ethical_planner.terminal`` states the rule. A plan that ends with the ego's
+    footprint in an oncoming road user's lane is a predicted collision (level 1) unless
+    the ego can return to its side of the lane boundary, with a quintic lateral move at
+    ``return_lateral_acceleration``, ``time_buffer`` before the road user arrives.
+
+    Attributes:
+        enabled: apply the condition (False: plans are judged over their horizon only).
+        return_lateral_acceleration: peak lateral acceleration of the return [m/s^2].
+            3.0 m/s^2 is a brisk but ordinary lane change (drivers' lane changes peak at
+            1-3 m/s^2), well inside the tyres' 8 m/s^2: the condition must not rest on
+            an emergency manoeuvre.
+        time_buffer: margin between the end of the return and the road user's arrival
+            [s]. 1.0 s is the order of a driver's reaction time and of one replanning
+            interval plus the controller's tracking lag.
+        min_speed: road users slower than this along the path are not oncoming [m/s].
+        oncoming_angle: a road user is oncoming if its heading is within this angle of
+            the path's opposite direction [rad] (60 degrees).
+    """
+
+    enabled: bool = True
+    return_lateral_acceleration: float = 3.0
+    time_buffer: float = 1.0
+    min_speed: float = 0.5
+    oncoming_angle: float = math.pi / 3.0
+
+    def __post_init__(self) -> None:
+        check(isinstance(self.enabled, bool), f"terminal.enabled must be true or false, got {self.enabled!r}")
+        check_positive("terminal", return_lateral_acceleration=self.return_lateral_acceleration)
+        check_non_negative("terminal", time_buffer=self.time_buffer, min_speed=self.min_speed)
+        check(
+            0.0 < self.oncoming_angle < 0.5 * math.pi,
+            f"terminal.oncoming_angle must lie in (0, pi/2) rad, got {self.oncoming_angle}",
+        )
+
+
+@dataclass(frozen=True, slots=True)
 class PlannerConfig:
     """Everything a planning cycle needs besides the scene.
 
@@ -572,6 +611,7 @@ class PlannerConfig:
     weights: CostWeights = field(default_factory=CostWeights)
     commitment: CommitmentConfig = field(default_factory=CommitmentConfig)
     traffic_rules: TrafficRulesConfig = field(default_factory=TrafficRulesConfig)
+    terminal: TerminalConfig = field(default_factory=TerminalConfig)
 
     def __post_init__(self) -> None:
         if self.desired_speed is not None:

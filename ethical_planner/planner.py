@@ -39,6 +39,7 @@ from ethical_planner.sampling import (
     frenet_state,
     sample_candidates,
 )
+from ethical_planner.terminal import terminally_unsafe
 from ethical_planner.traffic_rules import StopLines, breaks_stop_lines, stood_at, stop_targets
 from ethical_planner.validity import Validity, physically_invalid, validity_levels
 from ethical_planner.workers import Workers
@@ -130,6 +131,9 @@ class Decision:
         level_counts: candidates per validity level.
         invalid_counts: physically invalid candidates per broken limit (a candidate
             may break several).
+        terminal_unsafe: candidates within the physical limits that end in oncoming
+            traffic's way too late to get out (``ethical_planner.terminal``); they count
+            as level 1 (collision beyond the horizon).
         best_by_level: the cheapest sampled candidate of each level whose candidates
             were costed, by level (ties broken by comfort plus mobility, as the choice
             does). Costs need risk, which is evaluated only for the candidates of the
@@ -158,6 +162,7 @@ class Decision:
     level: int
     level_counts: dict[int, int]
     invalid_counts: dict[str, int]
+    terminal_unsafe: int
     best_by_level: dict[int, LevelBest]
     reason: str
     emergency: bool
@@ -183,6 +188,7 @@ class Decision:
             "level": self.level,
             "level_counts": {str(k): v for k, v in self.level_counts.items()},
             "invalid_counts": dict(self.invalid_counts),
+            "terminal_unsafe": self.terminal_unsafe,
             "best_by_level": {str(k): v.to_dict() for k, v in self.best_by_level.items()},
             "reason": self.reason,
             "emergency": self.emergency,
@@ -204,6 +210,8 @@ class Decision:
     def summary(self) -> str:
         """Multi-line text a person reads: choice, reason, costs, per-road-user risk."""
         counts = ", ".join(f"L{k}: {v}" for k, v in sorted(self.level_counts.items(), reverse=True))
+        if self.terminal_unsafe:
+            counts += f" (L1 includes {self.terminal_unsafe} ending in oncoming traffic's way)"
         lines = [
             f"[{self.planner}] level {self.level} ({Validity(self.level).name.lower()}), "
             f"candidate {self.chosen_index} ({self.candidate.describe()}); {counts}",
@@ -243,6 +251,8 @@ class _Evaluation:
         costs: cost terms of every candidate, shape (n,) each, NaN where not assessed.
         risk_obs: R_k of every candidate, shape (n, k), 0 where not assessed.
         ego_combined: R_ego of every candidate, shape (n,), 0 where not assessed.
+        terminal: candidates that end in oncoming traffic's way too late to get out
+            (``ethical_planner.terminal``), shape (n,); they are level 1 unless invalid.
     """
 
     candidates: Candidates
@@ -254,6 +264,7 @@ class _Evaluation:
     costs: CostBreakdown
     risk_obs: np.ndarray
     ego_combined: np.ndarray
+    terminal: np.ndarray
 
     def position(self, index: int) -> int:
         """Row of candidate ``index`` in the assessed arrays."""
@@ -337,6 +348,12 @@ class Planner:
         )
         collision = np.zeros(n, dtype=bool)
         collision[considered] = collides(tables, np.arange(considered.size), first_step=1)
+        # A plan ending in oncoming traffic's way too late to get out is a predicted
+        # collision beyond the horizon (``ethical_planner.terminal``).
+        terminal = terminally_unsafe(
+            candidates, prediction, self.environment, self.ego_shape, config.terminal
+        )
+        collision[considered] |= terminal[considered]
         outside = np.zeros((n, n_t), dtype=bool)
         on_road = considered[~collision[considered]]
         outside[on_road] = outside_drivable_area(
@@ -405,7 +422,9 @@ class Planner:
         clock = time.perf_counter()
         costs = _full_costs(self._costs(candidates, risk, r_obs, r_ego, levels), assessed, n)
         timings["cost"] = timings.get("cost", 0.0) + _since(clock)
-        return _Evaluation(candidates, risk, r_obs, r_ego, levels, invalid, costs, risk_obs, ego_combined)
+        return _Evaluation(
+            candidates, risk, r_obs, r_ego, levels, invalid, costs, risk_obs, ego_combined, terminal
+        )
 
     def _breaks_rules(self, candidates: Candidates, lines: StopLines | None) -> np.ndarray:
         """Candidates that cross a binding stop line, shape (n,) (``traffic_rules``)."""
@@ -643,6 +662,9 @@ class Planner:
             f"break a physical limit); least expected harm by the risk cost (Eq. 6) over all "
             f"of them: {_describe(candidates, index)}, J_risk {risk_cost[index]:.4g}"
         )
+        n_terminal = int(grid.terminal[in_level].sum())
+        if n_terminal:
+            reason += f"; {n_terminal} of them end in oncoming traffic's way too late to get out"
         if stops.size and candidates.kind[index] != CandidateKind.BRAKE:
             best_stop = int(stops[np.argmin(risk_cost[stops])])
             stop = _describe(candidates, best_stop)
@@ -720,6 +742,7 @@ class Planner:
             level=int(chosen.levels[index]),
             level_counts={int(v): int(c) for v, c in zip(values, counts, strict=True)},
             invalid_counts={k: int(v.sum()) for k, v in grid.invalid.items()},
+            terminal_unsafe=int((grid.terminal & (grid.levels == Validity.COLLISION)).sum()),
             best_by_level=_best_by_level(grid),
             reason=reason,
             emergency=emergency,

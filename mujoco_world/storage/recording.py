@@ -426,6 +426,7 @@ class RerunRecorder(RunObserver):
         for level in REJECTED_LEVELS:
             s.add(f"series/rejected/{_level_name(level)}", time, c, float(counts.get(int(level), 0)))
         s.add("series/rejected/max_risk_refused", time, c, float(decision.max_risk_refused))
+        s.add("series/rejected/terminal_unsafe", time, c, float(decision.terminal_unsafe))
         for limit in LIMITS:
             s.add(f"series/rejected/limit/{limit}", time, c, float(decision.invalid_counts.get(limit, 0)))
 

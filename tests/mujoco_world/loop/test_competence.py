@@ -129,3 +129,21 @@ def test_cause_4_curve_truck_reaches_the_goal_passing_the_walker_with_clearance(
     assert summary.outcome == "goal", summary.reason
     assert not _ego_collisions(summary)
     assert summary.min_distance_vulnerable >= 1.0
+
+
+def test_terminal_safety_the_ego_does_not_end_its_plans_in_the_way_of_the_oncoming_truck():
+    """curve_truck-s0-7 (a random variant): to give the walker room the ego moved into
+    the oncoming lane while the truck was 100 m ahead; every plan was collision-free
+    over its 3 s, the truck arrived just beyond it and cut the corner into the ego
+    (collision at 5.1 s). Plans that end in the oncoming lane too late to return before
+    the truck arrives are now level 1 (``ethical_planner.terminal``): the ego stays in
+    its lane and shifts right while the truck passes."""
+    from mujoco_world.loop.runner import run_scenario
+    from mujoco_world.scenario.catalog import generated_scenario
+
+    scenario = dataclasses.replace(generated_scenario("curve_truck-s0-7"), duration=6.5)
+    summary = run_scenario(scenario, "ethical", seed=0)
+    assert summary.outcome != "failed", summary.reason
+    assert not _ego_collisions(summary), [
+        (c.measurement.a.name, c.measurement.b.name) for c in summary.collisions
+    ]
