@@ -574,6 +574,14 @@ class TerminalConfig:
         min_speed: road users slower than this along the path are not oncoming [m/s].
         oncoming_angle: a road user is oncoming if its heading is within this angle of
             the path's opposite direction [rad] (60 degrees).
+        standstill_distance: a plan must end able to stop this far before a static
+            obstacle of the road (debris) [m]. 9.0 m is the arc length a quintic
+            lateral move of one lane width (3.5 m) needs at the steering limit
+            (0.249 1/m): from there the ego can still steer around it
+            (``terminal.standstill_distance``). debris_on_lane: stopped 0.6 m before the
+            debris, the ego could not pass it without reversing.
+        stopping_deceleration: the braking assumed for that stop [m/s^2]; 3.0 m/s^2 is
+            a firm, ordinary stop (the ITE amber-interval deceleration).
     """
 
     enabled: bool = True
@@ -581,11 +589,19 @@ class TerminalConfig:
     time_buffer: float = 1.0
     min_speed: float = 0.5
     oncoming_angle: float = math.pi / 3.0
+    standstill_distance: float = 9.0
+    stopping_deceleration: float = 3.0
 
     def __post_init__(self) -> None:
         check(isinstance(self.enabled, bool), f"terminal.enabled must be true or false, got {self.enabled!r}")
         check_positive("terminal", return_lateral_acceleration=self.return_lateral_acceleration)
-        check_non_negative("terminal", time_buffer=self.time_buffer, min_speed=self.min_speed)
+        check_positive("terminal", stopping_deceleration=self.stopping_deceleration)
+        check_non_negative(
+            "terminal",
+            time_buffer=self.time_buffer,
+            min_speed=self.min_speed,
+            standstill_distance=self.standstill_distance,
+        )
         check(
             0.0 < self.oncoming_angle < 0.5 * math.pi,
             f"terminal.oncoming_angle must lie in (0, pi/2) rad, got {self.oncoming_angle}",

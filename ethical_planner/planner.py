@@ -39,7 +39,7 @@ from ethical_planner.sampling import (
     frenet_state,
     sample_candidates,
 )
-from ethical_planner.terminal import terminally_unsafe
+from ethical_planner.terminal import crowds_static_obstacle, terminally_unsafe
 from ethical_planner.traffic_rules import StopLines, breaks_stop_lines, stood_at, stop_targets
 from ethical_planner.validity import Validity, physically_invalid, validity_levels
 from ethical_planner.workers import Workers
@@ -366,6 +366,11 @@ class Planner:
             edge = outside_drivable_area(candidates, self.ego_shape, self.environment, 0.0, on_road)
             outside[on_road] = (outside[on_road] & ~inherited) | edge
         outside[:, 0] = False
+        # A plan that ends unable to stop short of debris with room to steer around it
+        # comes too close to the drivable area's edge (``ethical_planner.terminal``).
+        outside[on_road, -1] |= crowds_static_obstacle(
+            candidates, on_road, self.environment, self.ego_shape, config.terminal
+        )
         max_risk = config.risk.max_acceptable_risk
         breaks = self._breaks_rules(candidates, lines)
         zero_risk = np.zeros((n, k)), np.zeros(n)

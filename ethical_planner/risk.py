@@ -233,6 +233,11 @@ def _holes(area: shapely.Geometry) -> shapely.Geometry | None:
     return holes
 
 
+def static_obstacles(environment: RoadEnvironment) -> shapely.Geometry | None:
+    """The obstacles inside the road (debris): the drivable area's holes as polygons, or None."""
+    return _holes(environment.drivable_area)
+
+
 def prediction_tables(
     candidates: Candidates,
     rows: np.ndarray,

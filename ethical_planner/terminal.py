@@ -30,6 +30,14 @@ car gets there"):
 A terminally unsafe plan is a predicted collision, beyond the horizon: validity level 1.
 The check needs no integral and costs one Frenet projection per road user.
 
+The same idea for static obstacles inside the road (debris, holes of the drivable
+area): a plan must end where the ego can still stop ``standstill_distance`` before the
+obstacle, braking at ``stopping_deceleration`` (``crowds_static_obstacle``). An ego that
+stops right behind debris cannot steer around it without reversing: the standstill
+distance is the arc length a quintic lateral move of one lane width needs at the
+steering limit, sqrt(10 / sqrt(3) w / kappa_max) (9.0 m for 3.5 m and 0.249 1/m). Such a
+plan comes too close to the edge of the drivable area: validity level 2.
+
 Limits: the return is checked against oncoming traffic only (a plan ending behind a
 stopped vehicle or at a wall is judged by the risk and the road edge); a road user
 standing still in the oncoming lane is not taken to start; the return path itself
@@ -41,11 +49,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import shapely
 
 from ethical_planner.config import TerminalConfig
 from ethical_planner.environment import RoadEnvironment
-from ethical_planner.geometry import wrap_angle
+from ethical_planner.geometry import rectangle_corners, wrap_angle
 from ethical_planner.prediction import Prediction
+from ethical_planner.risk import static_obstacles
 from ethical_planner.road_users import Shape
 from ethical_planner.sampling import Candidates
 
@@ -115,4 +125,55 @@ def terminally_unsafe(
     return unsafe
 
 
-__all__ = ["QUINTIC_PEAK", "return_time", "terminally_unsafe"]
+def standstill_distance(lateral_shift: float, max_curvature: float) -> float:
+    """Arc length [m] a quintic lateral move of ``lateral_shift`` [m] needs at ``max_curvature`` [1/m].
+
+    The curvature of a lateral quintic over arc length S peaks at about
+    10 / sqrt(3) D / S^2 (small slopes), so S = sqrt(10 / sqrt(3) D / kappa_max).
+    """
+    return math.sqrt(QUINTIC_PEAK * lateral_shift / max_curvature)
+
+
+def crowds_static_obstacle(
+    candidates: Candidates,
+    rows: np.ndarray,
+    environment: RoadEnvironment,
+    ego_shape: Shape,
+    config: TerminalConfig,
+) -> np.ndarray:
+    """Which candidates of ``rows`` end unable to stop short of a static obstacle, shape (m,).
+
+    The end footprint is stretched forward by the standstill distance plus the stopping
+    distance v^2 / (2 b) at the end speed; it must not touch an obstacle of the road.
+
+    Args:
+        candidates: the cycle's candidates (their last sample is the end state).
+        rows: the candidates to test.
+        environment: the road; its drivable area's holes are the static obstacles.
+        ego_shape: the ego's footprint [m].
+        config: ``standstill_distance`` [m], ``stopping_deceleration`` [m/s^2].
+    """
+    rows = np.asarray(rows, dtype=int)
+    out = np.zeros(rows.size, dtype=bool)
+    obstacles = static_obstacles(environment)
+    if not config.enabled or obstacles is None or not rows.size:
+        return out
+    x, y, yaw, v = (getattr(candidates, name)[rows, -1] for name in ("x", "y", "yaw", "v"))
+    reach = config.standstill_distance + np.square(v) / (2.0 * config.stopping_deceleration)
+    # The footprint from its rear to ``reach`` beyond its front.
+    shift = 0.5 * reach
+    cx, cy = rectangle_corners(
+        x + shift * np.cos(yaw), y + shift * np.sin(yaw), yaw, ego_shape.length + reach, ego_shape.width
+    )
+    ring = np.stack([cx, cy], axis=-1)
+    boxes = shapely.polygons(np.concatenate([ring, ring[:, :1]], axis=1))
+    return shapely.intersects(obstacles, boxes)
+
+
+__all__ = [
+    "QUINTIC_PEAK",
+    "crowds_static_obstacle",
+    "return_time",
+    "standstill_distance",
+    "terminally_unsafe",
+]

@@ -5,12 +5,18 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import shapely
 
 from ethical_planner.config import TerminalConfig, preset
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.prediction import Prediction
 from ethical_planner.road_users import RoadUserType, Shape
-from ethical_planner.terminal import return_time, terminally_unsafe
+from ethical_planner.terminal import (
+    crowds_static_obstacle,
+    return_time,
+    standstill_distance,
+    terminally_unsafe,
+)
 
 #: A straight road along x from x = 0 (s = x): the ego lane centred on y = 0 (edges +-1.75), the oncoming
 #: lane centred on y = 3.5 (1.75 to 5.25).
@@ -105,3 +111,32 @@ def test_disabled_condition_and_bad_configuration():
         preset("ethical").with_overrides({"terminal": {"return_lateral_acceleration": 0.0}})
     with pytest.raises(ValueError, match="terminal.oncoming_angle"):
         preset("ethical").with_overrides({"terminal": {"oncoming_angle": 2.0}})
+
+
+def test_standstill_distance_is_the_room_to_swing_out_by_a_lane_at_the_steering_limit():
+    # Quintic d(s) = D (10 u^3 - 15 u^4 + 6 u^5), u = s / S: d'' peaks at 10 / sqrt(3) D / S^2.
+    s = np.linspace(0.0, 9.0135, 20001)
+    u = s / s[-1]
+    d = 3.5 * (10 * u**3 - 15 * u**4 + 6 * u**5)
+    kappa = np.gradient(np.gradient(d, s), s) / (1.0 + np.gradient(d, s) ** 2) ** 1.5
+    assert standstill_distance(3.5, math.tan(0.61) / 2.81) == pytest.approx(9.0135, abs=1e-3)
+    # The small-slope formula is the curvature's upper bound (the slope only lowers it).
+    assert np.abs(kappa).max() <= math.tan(0.61) / 2.81 + 1e-3
+
+
+def test_a_plan_must_end_able_to_stop_short_of_debris_with_room_to_steer():
+    # Debris 1.2 m long from x = 100 to 101.2 on the ego lane; ego 4.5 m long, front at
+    # x_end + 2.25. Standing (v = 0): it needs 9 m before the debris, so x_end <= 88.75
+    # is fine and beyond crowds it. At 6 m/s: 9 + 36 / 6 = 15 m, x_end <= 82.75.
+    road = RoadEnvironment.along_path([[0.0, 0.0], [500.0, 0.0]], lanes_left=1)
+    area = road.drivable_area.difference(shapely.box(100.0, -0.7, 101.2, 0.7))
+    road = RoadEnvironment(road.reference_path, area, lane_offsets=road.lane_offsets)
+    x = np.array([88.6, 88.9, 82.6, 82.9, 95.0])
+    v = np.array([0.0, 0.0, 6.0, 6.0, 0.0])
+    y = np.array([0.0, 0.0, 0.0, 0.0, 3.5])  # the last one waits in the other lane, beside it
+    ends = SimpleNamespace(
+        x=np.stack([x, x], 1), y=np.stack([y, y], 1), yaw=np.zeros((5, 2)), v=np.stack([v, v], 1)
+    )
+    crowds = crowds_static_obstacle(ends, np.arange(5), road, EGO, CONFIG)
+    assert crowds.tolist() == [False, True, False, True, False]
+    assert not crowds_static_obstacle(ends, np.arange(5), ROAD, EGO, CONFIG).any()  # no debris

@@ -147,3 +147,20 @@ def test_terminal_safety_the_ego_does_not_end_its_plans_in_the_way_of_the_oncomi
     assert not _ego_collisions(summary), [
         (c.measurement.a.name, c.measurement.b.name) for c in summary.collisions
     ]
+
+
+def test_standstill_distance_the_ego_waits_with_room_to_pass_the_debris():
+    """debris_on_lane: while the oncoming cars passed, the ego crept up to 0.6 m behind
+    the fallen load (its front at s = 88.9 m, the load from 89.4 m) and stalled there:
+    from so close it cannot steer around without reversing (the scenario's [expect]
+    failed). Plans must now end able to stop 9 m plus their stopping distance short of
+    static obstacles (``ethical_planner.terminal.crowds_static_obstacle``): it waits
+    further back and passes the load on the left by 11 s."""
+    from mujoco_world.loop.runner import run_scenario
+
+    scenario = get_scenario("debris_on_lane")
+    debris = scenario.debris[0]
+    summary = run_scenario(dataclasses.replace(scenario, duration=11.5), "ethical", seed=0)
+    assert summary.outcome != "failed", summary.reason
+    assert not _ego_collisions(summary)
+    assert summary.progress > debris.s + debris.length + 5.0  # its rear is past the load
