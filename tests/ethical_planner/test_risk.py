@@ -35,6 +35,7 @@ from ethical_planner.responsibility import LegalCorridors, collision_onset, resp
 from ethical_planner.risk import outside_drivable_area, prediction_collision_probability
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser
 from ethical_planner.road_users import RoadUserType as T
+from ethical_planner.terminal import terminally_unsafe
 from ethical_planner.validity import physically_invalid, validity_levels
 from ethical_planner.workers import Workers
 
@@ -282,7 +283,10 @@ def _brute_force_decision(planner, situation):
     ego_combined = 1.0 - np.prod(1.0 - risk_ego, axis=1) * (1.0 - boundary)
     invalid = physically_invalid(cand, config.vehicle)
     max_risk = config.risk.max_acceptable_risk
-    levels = validity_levels(invalid, full.mean_overlap, outside, risk_obs, ego_combined, max_risk)
+    # Terminal safety (tested by hand in test_terminal.py) is part of level 1.
+    terminal = terminally_unsafe(cand, pred, env, EGO_SHAPE, config.terminal)
+    overlap = full.mean_overlap | terminal[:, None, None]
+    levels = validity_levels(invalid, overlap, outside, risk_obs, ego_combined, max_risk)
     corridors = LegalCorridors.of(situation.road_users, env)
     peak, onset = collision_onset(p)
     r_obs, r_ego = responsibilities(
