@@ -426,6 +426,14 @@ def format_table(rows: list[dict]) -> str:
                 f"times added), ours all {r['n_trajectories']} (grid and braking family)"
             )
             break
+    lines.append(
+        "ours per stage, CPU ms of one more cycle (Decision.timings_ms: process time, all threads; "
+        "the stages add up to total):"
+    )
+    for r in rows:
+        stages = r.get("stages_ms") or {}
+        parts = ", ".join(f"{k} {v:.2f}" for k, v in stages.items() if k != "wall")
+        lines.append(f"  {r['n_trajectories']} candidates, {r['road_users']} road users: {parts}")
     return "\n".join(lines)
 
 

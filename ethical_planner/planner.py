@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -147,7 +147,13 @@ class Decision:
         max_acceptable_risk: R_max in force.
         costs: every cost term of the plan (Eqs. 5-11).
         road_users: per road user, in the order given.
-        timings_ms: wall time per stage [ms].
+        timings_ms: process CPU time per stage [ms]: ``sampling``, ``prediction``,
+            ``validity``, ``risk``, ``responsibility``, ``cost``, ``selection`` and
+            ``record`` (this record), which add up to ``total`` (less the clock reads);
+            ``wall``: the cycle's wall time [ms]. Process time counts every thread of the
+            process: the collision-probability pool's workers (what the cycle costs), but
+            also any other thread the caller runs meanwhile. On a shared machine wall
+            time also counts other jobs' time slices.
         candidate_x, candidate_y: all candidates [m], shape (n, n_t), for display.
         candidate_levels: their validity levels, shape (n,).
         prediction: the prediction used.
@@ -228,7 +234,9 @@ class Decision:
                 f"harm {u.harm:.3f} risk {u.risk:.5f} | ego harm {u.ego_harm:.3f} "
                 f"ego risk {u.ego_risk:.5f} | r {u.responsibility:.2f}/{u.ego_responsibility:.2f}"
             )
-        lines.append("  time: " + ", ".join(f"{k} {v:.2f} ms" for k, v in self.timings_ms.items()))
+        stages = ", ".join(f"{k} {v:.2f}" for k, v in self.timings_ms.items() if k != "wall")
+        wall = self.timings_ms.get("wall", math.nan)
+        lines.append(f"  CPU time [ms]: {stages}; wall {wall:.2f} ms")
         return "\n".join(lines)
 
 
@@ -330,7 +338,7 @@ class Planner:
         lines: StopLines | None = None,
     ) -> _Evaluation:
         config = self.config
-        clock = time.perf_counter()
+        clock = _clock()
         n, n_t = candidates.x.shape
         k = prediction.n_obs
         # Levels 0, 1 and 2 need no integral: physical limits, then (for the candidates
@@ -383,7 +391,7 @@ class Planner:
         assessed = np.flatnonzero(possible >= min(best, Validity.BREAKS_TRAFFIC_RULE))
         timings["validity"] = timings.get("validity", 0.0) + _since(clock)
 
-        clock = time.perf_counter()
+        clock = _clock()
         position = np.full(n, -1)
         position[considered] = np.arange(considered.size)
         with_onset = config.weights.responsibility != 0.0
@@ -409,7 +417,7 @@ class Planner:
         levels = _rule_levels(levels, breaks)
         timings["risk"] = timings.get("risk", 0.0) + _since(clock)
 
-        clock = time.perf_counter()
+        clock = _clock()
         r_obs = r_ego = None
         if with_onset:
             r_obs, r_ego = responsibilities(
@@ -424,7 +432,7 @@ class Planner:
             )
         timings["responsibility"] = timings.get("responsibility", 0.0) + _since(clock)
 
-        clock = time.perf_counter()
+        clock = _clock()
         costs = _full_costs(self._costs(candidates, risk, r_obs, r_ego, levels), assessed, n)
         timings["cost"] = timings.get("cost", 0.0) + _since(clock)
         return _Evaluation(
@@ -525,7 +533,8 @@ class Planner:
             raise ValueError("ego_state must be a KinematicState")
         config = self.config
         timings: dict[str, float] = {}
-        start_clock = clock = time.perf_counter()
+        start_clock = clock = _clock()
+        wall_clock = time.perf_counter()
         path = self.environment.reference_path
         start = frenet_state(ego_state, path)
         previous = self._previous if config.commitment.enabled else None
@@ -543,7 +552,7 @@ class Planner:
             rules.min_deceleration,
         )
         timings["sampling"] = _since(clock)
-        clock = time.perf_counter()
+        clock = _clock()
         if prediction is None:
             prediction = self.predictor.predict(road_users, candidates.t)
             if not isinstance(prediction, Prediction):
@@ -563,7 +572,7 @@ class Planner:
         timings["prediction"] = _since(clock)
 
         grid = self._evaluate(candidates, prediction, corridors, timings, lines)
-        clock = time.perf_counter()
+        clock = _clock()
         best_level = int(grid.levels.max())
         chosen = grid
         emergency = False
@@ -580,10 +589,12 @@ class Planner:
             index, reason, continued = self._choose(grid, best_level)
         self._previous = PreviousPlan.of(chosen.candidates, index)
         timings["selection"] = _since(clock)
+        clock = _clock()
+        decision = self._record(grid, chosen, index, reason, emergency, continued, prediction, road_users)
+        timings["record"] = _since(clock)
         timings["total"] = _since(start_clock)
-        return self._record(
-            grid, chosen, index, reason, emergency, continued, prediction, road_users, timings
-        )
+        timings["wall"] = (time.perf_counter() - wall_clock) * 1e3
+        return replace(decision, timings_ms={k: round(v, 3) for k, v in timings.items()})
 
     def reset(self) -> None:
         """Forget the previous plan and the stop signs stood at (a new run, or the ego was moved)."""
@@ -686,7 +697,6 @@ class Planner:
         continued: bool,
         prediction: Prediction,
         road_users: Sequence[RoadUser],
-        timings: dict[str, float],
     ) -> Decision:
         config = self.config
         risk, j = chosen.risk, chosen.position(index)
@@ -756,7 +766,7 @@ class Planner:
             max_acceptable_risk=config.risk.max_acceptable_risk,
             costs=costs,
             road_users=assessments,
-            timings_ms={k: round(v, 3) for k, v in timings.items()},
+            timings_ms={},
             candidate_x=grid.candidates.x,
             candidate_y=grid.candidates.y,
             candidate_levels=grid.levels,
@@ -797,5 +807,11 @@ def _describe(candidates: Candidates, index: int) -> str:
     return CandidateParameters.of(candidates, index).describe()
 
 
+def _clock() -> float:
+    """The stage timers' clock [s]: process CPU time, all threads (the collision-probability pool's too)."""
+    return time.process_time()
+
+
 def _since(clock: float) -> float:
-    return (time.perf_counter() - clock) * 1e3
+    """CPU time since ``clock`` [ms]."""
+    return (_clock() - clock) * 1e3

@@ -1,6 +1,7 @@
 import dataclasses
 import json
 import math
+import time
 
 import numpy as np
 import pytest
@@ -129,6 +130,38 @@ def test_decision_record_is_complete_and_json_able():
     assert [u["id"] for u in record["road_users"]] == [1, 2]
     assert record["timings_ms"]["total"] > 0
     assert "level" in decision.summary()
+
+
+class _SlowPredictor:
+    """The ethical preset's predictor, sleeping ``seconds`` first (no CPU time spent)."""
+
+    name = "slow"
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+        self.inner = make_predictor(preset("ethical").prediction)
+
+    def predict(self, road_users, times):
+        time.sleep(self.seconds)
+        return self.inner.predict(road_users, times)
+
+
+def test_stage_timers_are_cpu_time_and_add_up_to_the_cycle():
+    """Every stage is reported, the stages add up to at most ``total`` (CPU), ``wall`` is wall time.
+
+    The predictor sleeps 0.3 s: wall time counts the sleep, CPU time does not (a mutant
+    timing the stages with ``time.perf_counter`` goes red). No speed is asserted.
+    """
+    situation = overtaking_cyclist()
+    planner = Planner(preset("ethical"), situation.environment, predictor=_SlowPredictor(0.3))
+    timings = planner.plan(situation.ego, situation.road_users).timings_ms
+    stages = ("sampling", "prediction", "validity", "risk", "responsibility", "cost", "selection", "record")
+    assert set(timings) == {*stages, "total", "wall"}
+    assert all(timings[k] >= 0 for k in timings)
+    # Consecutive intervals of one clock, each rounded to 1 us.
+    assert sum(timings[k] for k in stages) <= timings["total"] + 1e-3 * len(stages)
+    assert timings["wall"] >= 300.0
+    assert timings["prediction"] < 150.0 and timings["total"] < timings["wall"]
 
 
 def test_risk_of_the_chosen_plan_matches_a_scalar_recomputation():

@@ -28,7 +28,14 @@ def test_bench_small_grid_writes_json(tmp_path, capsys):
     rows = json.loads(out.read_text())
     assert [r["road_users"] for r in rows] == [0, 5, 20]
     assert all(r["n_trajectories"] == 225 and r["ours_median_ms"] > 0 for r in rows)
-    assert "frenetix" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "frenetix" in text
+    # The per-stage CPU breakdown is printed for every row and adds up to at most its total.
+    for r in rows:
+        stages = {k: v for k, v in r["stages_ms"].items() if k not in ("total", "wall")}
+        assert {"sampling", "prediction", "risk", "record"} <= set(stages)
+        assert sum(stages.values()) <= r["stages_ms"]["total"] + 1e-3 * len(stages)
+        assert f"225 candidates, {r['road_users']} road users: sampling" in text
 
 
 def test_bench_lists_the_benchmarks_candidate_sets():
