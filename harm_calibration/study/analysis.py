@@ -43,14 +43,13 @@ from harm_calibration.study.statistics import (
     paired_test,
     poisson_rate_ci,
 )
+from mujoco_world.loop.summary import OUTCOMES
 
 #: Groups of the paper's Figs. 5 and 6.
 GROUPS = ("ego", "third_party", "vulnerable")
 GROUP_LABELS = {"ego": "Ego AV", "third_party": "3rd party", "vulnerable": "VRU"}
 #: Values per group and planner in Fig. 5.
 TOP_N = 100
-#: Run outcomes.
-OUTCOMES = ("goal", "timeout", "crash", "failed")
 
 
 @dataclass(frozen=True, slots=True)

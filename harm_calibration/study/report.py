@@ -12,7 +12,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from harm_calibration.study.analysis import GROUP_LABELS, GROUPS, TOP_N, StudyAnalysis
+from harm_calibration.study.analysis import GROUP_LABELS, GROUPS, OUTCOMES, TOP_N, StudyAnalysis
 from harm_calibration.study.statistics import PairedTest
 
 #: Significance level (after Holm's adjustment).
@@ -240,15 +240,15 @@ def render(
                 )
     out += ["", "## Runs, outcomes, crashes", ""]
     out += [
-        "| planner | runs | goal | timeout | crash | failed | ego crashes | avoidable | unavoidable | km | "
-        "ego crashes per 1000 km (95 %) |",
-        "| --- |" + " --- |" * 10,
+        "| planner | runs | "
+        + " | ".join(OUTCOMES)
+        + " | ego crashes | avoidable | unavoidable | km | ego crashes per 1000 km (95 %) |",
+        "| --- |" + " --- |" * (len(OUTCOMES) + 6),
     ]
     for p, t in analysis.table.items():
         o = t.outcomes
         out.append(
-            f"| {p} | {t.runs} | {o['goal']} | {o['timeout']} | {o['crash']} | {o['failed']} | "
-            f"{t.ego_crashes} | "
+            f"| {p} | {t.runs} | " + " | ".join(str(o[name]) for name in OUTCOMES) + f" | {t.ego_crashes} | "
             f"{t.avoidable} | {t.unavoidable} | {t.km:.1f} | {t.crashes_per_1000km.text(3)} |"
         )
     if rejected_by_reason:

@@ -446,7 +446,7 @@ def _table_line(record: RunRecord) -> str:
     risk, harm = s.max_risk, s.harm_ego_involved
     third_harm = sum(v for v in s.harm_third_party.values() if math.isfinite(v))
     return (
-        f"{s.scenario:<30} {s.planner:<9} {s.seed!s:>4} {_outcome_label(s):<8} "
+        f"{s.scenario:<30} {s.planner:<9} {s.seed!s:>4} {_outcome_label(s):<14} "
         f"{_fmt(s.duration, 1):>6} {len(s.ego_collisions):>3} {len(s.third_party_collisions):>3} "
         f"{_fmt(risk.get('ego')):>8} {_fmt(risk.get('third_party')):>7} "
         f"{_fmt(risk.get('vulnerable')):>7} "
@@ -498,7 +498,7 @@ def comparison_table(records: Iterable[RunRecord]) -> str:
     """
     runs = sorted(records, key=lambda r: (r.summary.scenario, r.summary.planner, r.summary.seed))
     head = (
-        f"{'scenario':<30} {'planner':<9} {'seed':>4} {'outcome':<8} {'t [s]':>6} {'ego':>3} {'3rd':>3} "
+        f"{'scenario':<30} {'planner':<9} {'seed':>4} {'outcome':<14} {'t [s]':>6} {'ego':>3} {'3rd':>3} "
         f"{'risk ego':>8} {'3rd':>7} {'VRU':>7} {'harm ego':>7} {'3rd':>6} {'VRU':>6} {'3rd-pty':>7} "
         f"{'min d':>6} {'VRU d':>6} {'avoid':>5} {'expect':<6}"
     )

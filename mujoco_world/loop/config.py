@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ethical_planner.validation import check, check_positive
+from mujoco_world.loop.progress import StallConfig
 from mujoco_world.loop.world import ObservationNoise
 from mujoco_world.physics.control import ControlConfig
 
@@ -28,6 +29,8 @@ class RunConfig:
         control: tracking controller.
         predictor: name of a registered predictor that replaces the planner
             configuration's ``[prediction] model`` (None keeps it).
+        stall: at the time limit, what counts as a standing ego and a blocked way
+            (outcomes ``timeout``, ``stopped_safely``, ``no_progress``; ``loop.progress``).
     """
 
     replan_rate: float = 10.0
@@ -42,6 +45,7 @@ class RunConfig:
     control_interval: int = 10
     control: ControlConfig = field(default_factory=ControlConfig)
     predictor: str | None = None
+    stall: StallConfig = field(default_factory=StallConfig)
 
     def __post_init__(self) -> None:
         check_positive(

@@ -11,8 +11,10 @@ run. ``default_rules`` gives the built-in ones in their order:
 3. ``PostCrashTime``: ``post_crash_time`` after the crash: ``crash``.
 4. ``Goal``: before any crash, the ego passed its goal on its route: ``goal``.
 
-``TimeLimit`` (the scenario's duration: ``timeout``, or ``crash`` after a crash) is
-always appended last by the runner, so every run ends. A new rule is a new object
+``TimeLimit`` (the scenario's duration: ``crash`` after a crash; else ``timeout``,
+``stopped_safely`` or ``no_progress`` as ``loop.progress`` tells a slow ego, one that
+waits with a reason and one that stalls apart) is always appended last by the
+runner, so every run ends. A new rule is a new object
 with ``interval``, ``start`` and ``check`` (see ``StopRule``), passed with the
 defaults: ``run_scenario(..., rules=(*default_rules(config), MyRule()))``.
 
@@ -26,6 +28,7 @@ still has to reach its goal.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
@@ -34,12 +37,13 @@ import numpy as np
 
 from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.loop.config import RunConfig
+from mujoco_world.loop.progress import StallConfig, blocked_way, waiting_at_red
 from mujoco_world.loop.state import RunState
 from mujoco_world.loop.world import World
 
 #: Outcomes that say the run ended without a crash: a counted collision measured when
 #: the run is closed (an episode still open at the end) turns them into ``crash``.
-NO_CRASH_OUTCOMES = frozenset({"goal", "timeout"})
+NO_CRASH_OUTCOMES = frozenset({"goal", "timeout", "stopped_safely", "no_progress"})
 
 
 @dataclass(frozen=True, slots=True)
@@ -222,22 +226,61 @@ class Goal(StopRule):
 
 
 class TimeLimit(StopRule):
-    """The scenario's duration has passed: ``timeout`` (``crash`` after a crash)."""
+    """The scenario's duration has passed.
 
-    def __init__(self) -> None:
+    ``crash`` after a crash; otherwise (``loop.progress``) ``timeout`` if the ego still
+    made progress in the last ``stall.window`` seconds, ``stopped_safely`` if it stood
+    waiting at a red light or with its way blocked, ``no_progress`` if it stood with a
+    passage open. The ego's arc length is sampled at 10 Hz for the window.
+
+    Args:
+        stall: what counts as standing and as a blocked way.
+    """
+
+    #: Seconds between samples of the ego's progress.
+    SAMPLE_PERIOD = 0.1
+
+    def __init__(self, stall: StallConfig | None = None) -> None:
         self.interval = 1
         self.max_steps = 0
+        self.stall = stall if stall is not None else StallConfig()
 
     def start(self, run: RunState) -> None:
-        """The number of physics steps of the scenario's duration."""
+        """The number of physics steps of the scenario's duration; no progress sampled yet."""
         self.max_steps = int(round(run.scenario.duration / run.dt))
+        self.every = max(int(round(self.SAMPLE_PERIOD / run.dt)), 1)
+        self.progress: deque[float] = deque(maxlen=int(round(self.stall.window / self.SAMPLE_PERIOD)) + 1)
 
     def check(self, run: RunState) -> Stop | None:
-        """Ends the run after ``max_steps`` steps."""
+        """Ends the run after ``max_steps`` steps, with the outcome of the class docstring."""
+        if run.step % self.every == 0:
+            self.progress.append(run.world.ego_progress())
         if run.step < self.max_steps:
             return None
-        outcome = "crash" if run.crash_time is not None else "timeout"
-        return Stop(outcome, f"time limit of {run.scenario.duration} s reached")
+        reason = f"time limit of {run.scenario.duration} s reached"
+        if run.crash_time is not None:
+            return Stop("crash", reason)
+        return self._verdict(run, reason)
+
+    def _verdict(self, run: RunState, reason: str) -> Stop:
+        stall, world = self.stall, run.world
+        moved = world.ego_progress() - (self.progress[0] if self.progress else 0.0)
+        window = min(stall.window, run.time)
+        if moved >= stall.distance:
+            return Stop("timeout", f"{reason}; the ego moved {moved:.1f} m in the last {window:g} s")
+        light = waiting_at_red(world, stall.lookahead)
+        if light is not None:
+            return Stop("stopped_safely", f"{reason}; the ego waits at the red light {light!r}")
+        if blocked_way(world, stall.lookahead, stall.margin):
+            return Stop(
+                "stopped_safely",
+                f"{reason}; the ego stands, no passage of its width open {stall.lookahead:g} m ahead",
+            )
+        return Stop(
+            "no_progress",
+            f"{reason}; the ego moved {moved:.2f} m in the last {window:g} s with a passage of its "
+            f"width open {stall.lookahead:g} m ahead",
+        )
 
 
 def default_rules(config: RunConfig) -> tuple[StopRule, ...]:

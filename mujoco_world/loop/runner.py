@@ -156,7 +156,7 @@ class ClosedLoop:
         self.world = world
         self.rng = np.random.default_rng(seed)
         self.run = RunState(world, scenario, str(self.planner.name), int(seed))
-        self.rules = (*rules, TimeLimit())
+        self.rules = (*rules, TimeLimit(config.stall))
         self.metrics = tuple(metrics)
         self.timing = {"planning": 0.0, "measurement": 0.0}
         self.steps_per_cycle = max(int(round(1.0 / (config.replan_rate * world.scene.dt))), 1)

@@ -18,7 +18,11 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import shapely
+
 from ethical_planner.environment import StopLine
+from ethical_planner.geometry import rectangle_corners
 from ethical_planner.impulse import RestitutionLaw
 from ethical_planner.records import errors_in, from_mapping, read_toml
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, RoadUserType
@@ -27,7 +31,7 @@ from mujoco_world.scenario.imported import MapSpec, ObstacleSpec, Points, Record
 
 #: Run outcomes the closed loop gives (``loop.summary``; here so that ``[expect]`` can
 #: name them).
-OUTCOMES = ("goal", "timeout", "crash", "failed")
+OUTCOMES = ("goal", "timeout", "stopped_safely", "no_progress", "crash", "failed")
 
 
 def knots(owner: str, name: str, value: Any) -> tuple[tuple[float, float], ...]:
@@ -1368,11 +1372,61 @@ class Scenario:
                 f"debris[{i}] ({piece.name}).offset must put it on the road ({-right:g} to {left:g} m "
                 f"from the reference line), got {piece.offset:g}",
             )
+        self._check_debris_clear_of_ego()
+
+    def _check_debris_clear_of_ego(self) -> None:
+        """No debris lies under the ego at the start (the world would refuse the overlap later).
+
+        Both footprints in the road's (s, offset) frame: the ego at ``s0`` in the centre
+        of its lane, along the road; the debris at its ``s``, ``offset`` and ``yaw``.
+        """
+        ego, road = self.ego, self.road
+        if not self.debris or ego.pose is not None or road.kind is RoadKind.MAP:
+            return
+        d_ego = -road.half_width + (ego.lane + 0.5) * road.lane_width
+        pieces = self.debris
+        xs, ys = rectangle_corners(
+            np.array([ego.s0, *(p.s for p in pieces)]),
+            np.array([d_ego, *(p.offset for p in pieces)]),
+            np.radians([0.0, *(p.yaw for p in pieces)]),
+            np.array([ego.length, *(p.length for p in pieces)]),
+            np.array([ego.width, *(p.width for p in pieces)]),
+        )
+        boxes = shapely.polygons(np.stack([xs, ys], axis=-1))
+        overlap = shapely.area(shapely.intersection(boxes[0], boxes[1:])) > 0.0
+        for i in np.flatnonzero(overlap):
+            piece = pieces[i]
+            raise ValueError(
+                f"debris[{i}] ({piece.name}) lies under the ego at the start: the ego covers s "
+                f"{ego.s0 - 0.5 * ego.length:g} to {ego.s0 + 0.5 * ego.length:g} m and offset "
+                f"{d_ego - 0.5 * ego.width:g} to {d_ego + 0.5 * ego.width:g} m (lane {ego.lane}); "
+                f"move debris[{i}].s or .offset (or ego.s0) so that they do not overlap"
+            )
 
     def _check_events(self) -> None:
-        """Every road user a script's condition names exists (``to`` never the road user itself)."""
+        """Every road user a script's condition names exists (``to`` never the road user itself).
+
+        A script's lane changes, run in order from the road user's start lane, keep it on
+        the road's lanes (not checked on map roads and waypoint routes, which have no
+        lane numbers to change between).
+        """
         known = {"ego", *(u.name for u in self.road_users)}
+        lanes = self.road.lanes
         for i, user in enumerate(self.road_users):
+            lane = user.route.lane
+            numbered = (
+                self.road.kind is not RoadKind.MAP
+                and user.route.road is not RoadName.WAYPOINTS
+                and user.route.lane < lanes
+            )
+            for k, event in enumerate(user.behaviour.events):
+                lane += event.do.change_lane
+                check(
+                    not numbered or 0 <= lane < lanes,
+                    f"road_users[{i}] ({user.name}).behaviour.events[{k}].do.change_lane = "
+                    f"{event.do.change_lane} takes it to lane {lane}, off the road: its lanes are 0 to "
+                    f"{lanes - 1} (from the right in its direction), it starts in lane {user.route.lane}",
+                )
             for k, event in enumerate(user.behaviour.events):
                 for key in ("to", "of"):
                     other = getattr(event.when, key)

@@ -115,6 +115,8 @@ CASES = [
     ("restitution-both", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra='\n[contact]\nrestitution = [{ a = "car", b = "truck", e = 0.1, e_low = 0.3 }]\n')}, "give either e (a constant) or some of e_high, e_low, speed_scale"),
     ("sensor-range", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra="\n[sensor]\nrange = -5.0\n")}, "{d}/s.toml: sensor.range"),
     ("scenario-folder", ["run", "{d}/folder.toml"], {"folder.toml/x": ""}, "cannot read scenario file {d}/folder.toml"),
+    ("debris-under-ego", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra='\n[[debris]]\nname = "rock"\ns = 11.0\noffset = -1.75\nlength = 1.0\nwidth = 1.0\n')}, "debris[0] (rock) lies under the ego at the start"),
+    ("lane-change-off-road", ["run", "{d}/s.toml"], {"s.toml": _scenario(extra=_user(behaviour='{ kind = "scripted", speed = 5.0, events = [{ when = { time = 1.0 }, do = { change_lane = -1 } }] }'))}, "road_users[2] (third).behaviour.events[0].do.change_lane = -1 takes it to lane -1, off the road"),
     # ------------------------------------------------------------------- planner TOML
     ("n-speeds-float", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": "[sampling]\nn_speeds = 2.5\n"}, "{d}/p.toml: sampling.n_speeds must be an integer"),
     ("n-speeds-huge", ["run", "{d}/s.toml", "--config", "{d}/p.toml"], {"s.toml": SCENARIO, "p.toml": "[sampling]\nn_speeds = 100000\n"}, "{d}/p.toml: sampling.n_speeds must be an integer in 1..200"),

@@ -156,8 +156,12 @@ def test_time_limit_is_a_timeout_or_a_crash():
     rule = TimeLimit()
     rule.start(fake_run(world, duration=2.5))
     assert rule.max_steps == 2500
+    assert rule.check(fake_run(world, step=0, duration=2.5)) is None  # progress sampled: 0 m
+    world.progress, world.time = 12.0, 2.5
     assert rule.check(fake_run(world, step=2499, duration=2.5)) is None
-    assert rule.check(fake_run(world, step=2500, duration=2.5)).outcome == "timeout"
+    # Moving (12 m in the run's 2.5 s, more than the 1 m of a standing ego): a timeout.
+    stop = rule.check(fake_run(world, step=2500, duration=2.5))
+    assert stop.outcome == "timeout" and stop.reason.endswith("the ego moved 12.0 m in the last 2.5 s")
     assert rule.check(fake_run(world, crash_time=1.0, step=2500, duration=2.5)).outcome == "crash"
 
 

@@ -176,6 +176,21 @@ def test_debris_is_a_hole_the_planner_keeps_off_even_between_its_corners():
     assert outside.tolist() == [[True, False, False]]
 
 
+def test_debris_under_the_ego_at_the_start_is_refused_naming_both():
+    # The ego (4.508 x 1.61 m) at s0 = 5 m in lane 0 (offset -1.75 m) covers s 2.746 to
+    # 7.254 m and offset -2.555 to -0.945 m.
+    under = {"name": "rock", "s": 7.0, "offset": -1.0, "length": 1.0, "width": 1.0}
+    message = "debris[0] (rock) lies under the ego at the start"
+    with pytest.raises(ValueError, match=re_escape(message)) as info:
+        _scenario(debris=[under])
+    assert "s 2.746 to 7.254 m and offset -2.555 to -0.945 m (lane 0)" in str(info.value)
+    # Rotated 45 deg, a 1 m square at s = 8.1 m reaches back to 7.39 m: clear of the front.
+    _scenario(debris=[under | {"s": 8.1, "yaw": 45.0}])
+    # At s = 7.9 m its corner (7.19 m) is under the front, and the second piece is named.
+    with pytest.raises(ValueError, match=re_escape("debris[1] (stone) lies under the ego")):
+        _scenario(debris=[under | {"s": 30.0}, under | {"name": "stone", "s": 7.9, "yaw": 45.0}])
+
+
 def test_a_car_hitting_debris_hits_a_static_obstacle():
     scenario = _scenario(
         road={"length": 100.0},
@@ -183,8 +198,9 @@ def test_a_car_hitting_debris_hits_a_static_obstacle():
         duration=2.5,
     )
     summary = run_scenario(scenario, "keep_lane", seed=0)
-    # A collision without the ego is third-party: measured, but the run goes on.
-    assert summary.outcome == "timeout" and not summary.ego_collided
+    # A collision without the ego is third-party: measured, but the run goes on (the ego
+    # stands at 0 m/s on an open road throughout: no_progress).
+    assert summary.outcome == "no_progress" and not summary.ego_collided
     assert not summary.ego_collisions and summary.third_party_collisions
     record = summary.collisions[0]
     bodies = {record.measurement.a.entity, record.measurement.b.entity}

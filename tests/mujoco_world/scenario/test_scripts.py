@@ -148,6 +148,11 @@ def test_distance_and_time_to_collision_conditions():
             "events[0].when.ttc_below must lie in [0.01, 60] s",
         ),
         ({"when": {"time": 1.0}, "do": {"change_lane": 9}}, "do.change_lane must lie in -4..4"),
+        (
+            {"when": {"time": 1.0}, "do": {"change_lane": -1}},
+            "events[0].do.change_lane = -1 takes it to lane -1, off the road: its lanes are 0 to 1 "
+            "(from the right in its direction), it starts in lane 0",
+        ),
         ({"when": {"time": 1.0, "to": "a"}, "do": {"stop": True}}, "a road user measures to others"),
         (
             {"when": {"distance_above": 10.0, "distance_below": 5.0}, "do": {"stop": True}},
@@ -159,6 +164,15 @@ def test_distance_and_time_to_collision_conditions():
 def test_bad_events_are_named(event, message):
     with pytest.raises(ValueError, match=re.escape(message)):
         _world([event])
+
+
+def test_lane_changes_add_up_in_script_order():
+    left = {"when": {"time": 1.0}, "do": {"change_lane": 1}}
+    back = {"when": {"delay": 1.0}, "do": {"change_lane": -1}}
+    assert _world([left, back, left]).fleet  # 0 -> 1 -> 0 -> 1: on the road throughout
+    message = "events[1].do.change_lane = 1 takes it to lane 2, off the road"
+    with pytest.raises(ValueError, match=re.escape(message)):
+        _world([left, left])
 
 
 def test_parked_road_users_take_no_events():
