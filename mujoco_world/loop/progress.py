@@ -5,7 +5,7 @@ three outcomes (``rules.TimeLimit``):
 
 - ``timeout``: the ego was still making progress (it moved at least ``StallConfig.
   distance`` along its route in the last ``StallConfig.window`` seconds): it was slow,
-  not stuck;
+  not stuck; or the run was shorter than the window (too short to tell);
 - ``stopped_safely``: it stood (moved less than that) and had a reason to: it waits at a
   light that is red at the end with its front at most ``lookahead`` before the line, or
   its way is blocked: no passage wide enough for it leads from where it stands to the

@@ -228,8 +228,9 @@ class Goal(StopRule):
 class TimeLimit(StopRule):
     """The scenario's duration has passed.
 
-    ``crash`` after a crash; otherwise (``loop.progress``) ``timeout`` if the ego still
-    made progress in the last ``stall.window`` seconds, ``stopped_safely`` if it stood
+    ``crash`` after a crash; otherwise (``loop.progress``) ``timeout`` if the run is
+    shorter than ``stall.window`` or the ego still made progress in its last
+    ``stall.window`` seconds, ``stopped_safely`` if it stood
     waiting at a red light or with its way blocked, ``no_progress`` if it stood with a
     passage open. The ego's arc length is sampled at 10 Hz for the window.
 
@@ -264,8 +265,12 @@ class TimeLimit(StopRule):
 
     def _verdict(self, run: RunState, reason: str) -> Stop:
         stall, world = self.stall, run.world
-        moved = world.ego_progress() - (self.progress[0] if self.progress else 0.0)
-        window = min(stall.window, run.time)
+        if run.time < stall.window - 1e-9:
+            return Stop(
+                "timeout", f"{reason} (shorter than the {stall.window:g} s a standstill is judged over)"
+            )
+        moved = world.ego_progress() - self.progress[0]
+        window = stall.window
         if moved >= stall.distance:
             return Stop("timeout", f"{reason}; the ego moved {moved:.1f} m in the last {window:g} s")
         light = waiting_at_red(world, stall.lookahead)

@@ -156,13 +156,18 @@ def test_time_limit_is_a_timeout_or_a_crash():
     rule = TimeLimit()
     rule.start(fake_run(world, duration=2.5))
     assert rule.max_steps == 2500
-    assert rule.check(fake_run(world, step=0, duration=2.5)) is None  # progress sampled: 0 m
-    world.progress, world.time = 12.0, 2.5
     assert rule.check(fake_run(world, step=2499, duration=2.5)) is None
-    # Moving (12 m in the run's 2.5 s, more than the 1 m of a standing ego): a timeout.
+    # Shorter than the 5 s over which a standstill is judged: a timeout, standing or not.
+    world.time = 2.5
     stop = rule.check(fake_run(world, step=2500, duration=2.5))
-    assert stop.outcome == "timeout" and stop.reason.endswith("the ego moved 12.0 m in the last 2.5 s")
+    assert stop.outcome == "timeout" and "shorter than the 5 s" in stop.reason
     assert rule.check(fake_run(world, crash_time=1.0, step=2500, duration=2.5)).outcome == "crash"
+    # 8 s: progress sampled every 100 steps; 1.5 m in the last 5 s is moving.
+    rule.start(fake_run(world, duration=8.0))
+    for step in range(0, 8001, 100):
+        world.time, world.progress = step / 1000.0, 30.0 + 0.3 * step / 1000.0
+        stop = rule.check(fake_run(world, step=step, duration=8.0))
+    assert stop.outcome == "timeout" and stop.reason.endswith("the ego moved 1.5 m in the last 5 s")
 
 
 def test_diverged_is_an_untrusted_failure():

@@ -104,6 +104,23 @@ def test_the_planners_wait_for_the_green_and_meet_every_expectation(planner):
     assert summary.outcome == "goal"
 
 
+def test_the_planner_stops_at_a_stop_sign_then_drives_on():
+    """Closed loop: the planner's standstill memory and the world's judge agree."""
+    scenario = scenario_from_dict(
+        {
+            "name": "stop_sign",
+            "road": {"length": 150.0},
+            "ego": {"s0": 10.0, "speed": 10.0, "goal_s": 120.0},
+            "stop_lines": [{"name": "sign", "s": 60.0, "stop": True}],
+            "duration": 25.0,
+            "expect": {"max_rule_violations": 0, "reach_goal": True},
+        }
+    )
+    summary = run_scenario(scenario, "ethical", seed=0)
+    assert summary.rule_violations == () and summary.outcome == "goal"
+    assert all(e.passed for e in summary.expectations)
+
+
 def test_the_planner_receives_the_stop_lines_as_environment_data():
     env = World(get_scenario("red_light_for_ego")).environment()
     assert env.stop_lines == (StopLine(74.0, ((0.0, 9.0),), False),)
