@@ -113,11 +113,11 @@ def test_planner_exception_fails_the_run_and_keeps_the_measurements(monkeypatch)
     original = Planner.plan
     calls = {"n": 0}
 
-    def flaky(self, ego_state, road_users, prediction=None):
+    def flaky(self, ego_state, road_users, prediction=None, now=0.0):
         calls["n"] += 1
         if calls["n"] > 30:  # t = 3 s, after the third-party crash
             raise RuntimeError("planner exploded")
-        return original(self, ego_state, road_users, prediction)
+        return original(self, ego_state, road_users, prediction, now)
 
     monkeypatch.setattr(Planner, "plan", flaky)
     summary = run_scenario(third_party_crash(duration=10.0), "standard", seed=0)
