@@ -590,7 +590,7 @@ class Planner:
         self._previous = PreviousPlan.of(chosen.candidates, index)
         timings["selection"] = _since(clock)
         clock = _clock()
-        decision = self._record(grid, chosen, index, reason, emergency, continued, prediction, road_users)
+        decision = self._record(grid, chosen, index, reason, emergency, continued, prediction, corridors)
         timings["record"] = _since(clock)
         timings["total"] = _since(start_clock)
         timings["wall"] = (time.perf_counter() - wall_clock) * 1e3
@@ -696,7 +696,7 @@ class Planner:
         emergency: bool,
         continued: bool,
         prediction: Prediction,
-        road_users: Sequence[RoadUser],
+        corridors: LegalCorridors,
     ) -> Decision:
         config = self.config
         risk, j = chosen.risk, chosen.position(index)
@@ -718,7 +718,7 @@ class Planner:
                 np.array([index]),
                 *(value[None] for value in collision_onset(p)),
                 prediction,
-                LegalCorridors.of(road_users, self.environment),
+                corridors,
                 self.ego_mass,
                 config.responsibility,
             )

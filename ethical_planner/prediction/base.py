@@ -149,7 +149,7 @@ def _check_covariance(name: str, cov: np.ndarray, ids: np.ndarray) -> None:
     asym = np.abs(cov - np.swapaxes(cov, -1, -2)).max()
     if asym > 1e-9 * max(1.0, np.abs(cov).max()):
         raise ValueError(f"Prediction.{name} must be symmetric")
-    eig_min = np.linalg.eigvalsh(cov)[..., 0]
+    eig_min = smallest_eigenvalue(cov)
     bad = np.argwhere(eig_min < -1e-9)
     if len(bad):
         k, t = bad[0][:2]
@@ -157,6 +157,18 @@ def _check_covariance(name: str, cov: np.ndarray, ids: np.ndarray) -> None:
             f"Prediction.{name} of road user {ids[k]} at step {t} is not positive "
             f"semidefinite (smallest eigenvalue {eig_min[tuple(bad[0])]:.3g} m^2)"
         )
+
+
+def smallest_eigenvalue(cov: np.ndarray) -> np.ndarray:
+    """Smallest eigenvalue of symmetric 2x2 matrices [m^2], shape (..., 2, 2) -> (...).
+
+    Closed form (a + c) / 2 - hypot((a - c) / 2, b), vectorised (no LAPACK call per
+    matrix, ~8x faster than ``numpy.linalg.eigvalsh`` on a prediction's 20 x 51
+    matrices); accurate to rounding relative to the matrix's norm, as ``eigvalsh``.
+    """
+    a, c = cov[..., 0, 0], cov[..., 1, 1]
+    b = 0.5 * (cov[..., 0, 1] + cov[..., 1, 0])
+    return 0.5 * (a + c) - np.hypot(0.5 * (a - c), b)
 
 
 def floor_eigenvalues(cov: np.ndarray, floor: float) -> np.ndarray:

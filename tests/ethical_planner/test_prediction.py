@@ -5,6 +5,7 @@ import pytest
 
 from ethical_planner.config import PredictionConfig
 from ethical_planner.prediction import Prediction, predict_constant_turn_rate
+from ethical_planner.prediction.base import smallest_eigenvalue
 from ethical_planner.road_users import DEFAULT_SHAPES, KinematicState, RoadUser, RoadUserType
 
 
@@ -68,6 +69,48 @@ def test_non_psd_covariance_is_rejected_naming_the_road_user():
         _prediction(np.array([[[[1.0, 2.0], [2.0, 1.0]]]]))
     with pytest.raises(ValueError, match="symmetric"):
         _prediction(np.array([[[[1.0, 0.5], [0.0, 1.0]]]]))
+
+
+def _symmetric_cases(rng: np.random.Generator) -> np.ndarray:
+    """Random symmetric 2x2 matrices: PSD, indefinite, rank 1, zero, diagonal, huge and tiny."""
+    a = rng.normal(size=(500, 2, 2))
+    psd = a @ np.swapaxes(a, -1, -2)
+    sym = 0.5 * (a + np.swapaxes(a, -1, -2))
+    v = rng.normal(size=(300, 2)) * rng.choice([1e-6, 1.0, 1e4], size=(300, 1))
+    rank1 = v[:, :, None] * v[:, None, :]
+    special = np.array(
+        [
+            np.zeros((2, 2)),
+            np.eye(2),
+            0.1 * np.eye(2),
+            [[4.0, 0.0], [0.0, 0.0]],
+            [[0.0, 0.0], [0.0, 4.0]],
+            [[1.0, 1.0], [1.0, 1.0]],
+            [[-1.0, 0.0], [0.0, -3.0]],
+            [[1e8, 0.0], [0.0, 1e-8]],
+            [[2.0, -2.0], [-2.0, 2.0]],
+        ]
+    )
+    return np.concatenate([psd, sym, rank1, 1e6 * psd[:50], 1e-6 * psd[:50], special])
+
+
+def test_smallest_eigenvalue_closed_form_matches_lapack():
+    """The closed form against numpy.linalg.eigvalsh, to rounding relative to the matrix norm.
+
+    A mutant taking the larger root (``+`` for ``-``) or dropping b from the radius goes red.
+    """
+    cov = _symmetric_cases(np.random.default_rng(13))
+    expected = np.linalg.eigvalsh(cov)
+    scale = np.abs(expected).max(axis=-1)
+    got = smallest_eigenvalue(cov)
+    assert got.shape == (len(cov),)
+    np.testing.assert_array_less(np.abs(got - expected[:, 0]), 1e-14 * scale + 1e-300)
+    # Same shape handling over leading axes (road users, steps).
+    grid = cov[:600].reshape(20, 30, 2, 2)
+    np.testing.assert_array_equal(smallest_eigenvalue(grid), got[:600].reshape(20, 30))
+    # PSD matrices, rank 1 included, pass the planner's -1e-9 m^2 check; indefinite ones do not.
+    assert np.all(got[:500] >= -1e-9) and np.all(got[1000:1300] >= -1e-9 * scale[1000:1300])
+    assert np.array_equal(got[500:1000] < -1e-9, expected[500:1000, 0] < -1e-9)
 
 
 def test_empty_prediction_and_duplicate_ids():
