@@ -449,6 +449,7 @@ class Planner:
             candidates.t,
             lines,
             self.config.traffic_rules.comfortable_deceleration,
+            candidates.deceleration,
         )
 
     def _stop_lines(self, start: FrenetState, speed: float, now: float) -> StopLines | None:

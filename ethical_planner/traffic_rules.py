@@ -12,8 +12,9 @@ ego's length, reaching the line's arc length):
 - within the horizon: at the first step at or past the line, linearly interpolated
   between the samples;
 - after the horizon: if its end state cannot stop before the line at the comfortable
-  deceleration b_c (v_T^2 / (2 b_c) > gap_T), it is committed to crossing and does so
-  at t_T + gap_T / v_T (its end speed held); otherwise it is taken to stop.
+  deceleration b_c, or at its own braking if it brakes harder (a braking candidate
+  brakes on to its stop: v_T^2 / (2 max(b_c, b)) > gap_T), it is committed to crossing
+  and does so at t_T + gap_T / v_T (its end speed held); otherwise it is taken to stop.
 
 A red light is broken if the light is red at now + the crossing time (the red windows
 are known: a light that will be red when the ego gets there binds already); a stop
@@ -22,12 +23,13 @@ sign is broken by any crossing before the ego has stood still (below
 
 Dilemma zone: a line binds only while the ego can still stop before it, from its
 present state with the jerk-limited braking of the braking candidates
-(``sampling.braking_motion``). For a light that turns red later the deceleration is
-the comfortable one (``TrafficRulesConfig.comfortable_deceleration``, 3 m/s^2): an ego
-that cannot stop comfortably when the light is about to change proceeds, as the amber
-phase intends. For a light that is red now, and for a stop sign, it is the vehicle's
-emergency deceleration (8 m/s^2): a red light or a stop sign is never run while full
-braking still stops before it.
+(``sampling.braking_motion``). For a light that turns red later, and that the ego
+reaches before its red at its present speed, the deceleration is the comfortable one
+(``TrafficRulesConfig.comfortable_deceleration``, 3 m/s^2): an ego that cannot stop
+comfortably when the light is about to change proceeds, as the amber phase intends.
+One that would reach the line in the red is held to the emergency deceleration, as
+is a light that is red now and a stop sign (8 m/s^2): a red light or a stop sign is
+never run while full braking still stops before it.
 """
 
 from __future__ import annotations
@@ -95,13 +97,21 @@ class StopLines:
                 red[i, : len(line.red)] = line.red
         s = np.array([line.s for line in lines], dtype=float)
         sign = np.array([line.stop for line in lines], dtype=bool)
+        real = np.isfinite(red[:, :, 1])  # padding windows are (inf, inf)
         red_now = np.any((red[:, :, 0] <= now) & (now < red[:, :, 1]), axis=1)
-        future_red = np.any(red[:, :, 1] > now, axis=1)
-        # Emergency braking for a light red now and a stop sign; comfortable braking
-        # for a light that turns red later (the amber dilemma zone).
-        firm = sign | red_now
-        decel = np.where(firm, vehicle.emergency_deceleration, rules.comfortable_deceleration)
+        future_red = np.any(real & (red[:, :, 1] > now), axis=1)
+        next_red = np.min(np.where(red[:, :, 0] > now, red[:, :, 0], np.inf), axis=1)
         gap = s - (start.s + front_offset)
+        # The amber release is for an ego that gets past the line before the red starts
+        # (at its present speed); one that would arrive in the red gains nothing by
+        # holding on, and the line binds as firmly as a red one.
+        arrival = gap / start.s_dot if start.s_dot > 0.0 else np.full(m, np.inf)
+        clears = arrival < next_red - now
+        # Emergency braking for a light red now, a stop sign and a light the ego would
+        # reach in its red; comfortable braking for one it clears before the red
+        # (the amber dilemma zone).
+        firm = sign | red_now | ~clears
+        decel = np.where(firm, vehicle.emergency_deceleration, rules.comfortable_deceleration)
         can_stop = stop_distance(start, decel, vehicle.max_jerk) <= gap
         binding = (gap > 0.0) & can_stop & np.where(sign, ~np.asarray(stood, dtype=bool), future_red)
         return cls(s, binding, sign, red[:, :, 0], red[:, :, 1], float(now))
@@ -134,6 +144,7 @@ def crossing_times(
     t: np.ndarray,
     line_s: np.ndarray,
     comfortable_deceleration: float,
+    end_braking: np.ndarray | None = None,
 ) -> np.ndarray:
     """When each candidate's front crosses each line, from now [s]; inf if it does not.
 
@@ -143,6 +154,9 @@ def crossing_times(
         t: times [s], shape (n_t,).
         line_s: the lines' arc lengths [m], shape (m,).
         comfortable_deceleration: b_c [m/s^2] of the end-state test.
+        end_braking: deceleration each candidate keeps after its horizon [m/s^2],
+            shape (n,) (a braking candidate brakes on to its stop; 0 for the others).
+            The end-state test uses the larger of it and b_c.
 
     Returns:
         Shape (n, m); 0 for a line at or behind the front at t = 0.
@@ -159,7 +173,12 @@ def crossing_times(
     inside = np.where(k == 0, 0.0, t[before] + fraction * (t[k] - t[before]))
     gap = line_s[None, :] - front[:, -1:]  # (n, m)
     v = np.maximum(end_speed, 0.0)[:, None]
-    committed = ~crosses & (v * v > 2.0 * comfortable_deceleration * gap)
+    b = (
+        np.full(n, comfortable_deceleration)
+        if end_braking is None
+        else np.maximum(end_braking, comfortable_deceleration)
+    )
+    committed = ~crosses & (v * v > 2.0 * b[:, None] * gap)
     with np.errstate(divide="ignore"):
         after = t[-1] + gap / v
     return np.where(crosses, inside, np.where(committed, after, np.inf))
@@ -171,6 +190,7 @@ def breaks_stop_lines(
     t: np.ndarray,
     lines: StopLines,
     comfortable_deceleration: float,
+    end_braking: np.ndarray | None = None,
 ) -> np.ndarray:
     """Which candidates cross a binding stop line, shape (n,) (module docstring).
 
@@ -180,12 +200,14 @@ def breaks_stop_lines(
         t: times from now [s], shape (n_t,).
         lines: this cycle's lines.
         comfortable_deceleration: b_c of the end-state test [m/s^2].
+        end_braking: deceleration kept after the horizon [m/s^2], shape (n,)
+            (``crossing_times``).
     """
     n = front.shape[0]
     rows = np.flatnonzero(lines.binding)
     if rows.size == 0:
         return np.zeros(n, dtype=bool)
-    when = crossing_times(front, end_speed, t, lines.s[rows], comfortable_deceleration)
+    when = crossing_times(front, end_speed, t, lines.s[rows], comfortable_deceleration, end_braking)
     at = lines.now + when[:, :, None]  # (n, b, 1)
     red = np.any((lines.red_start[rows] <= at) & (at < lines.red_end[rows]), axis=2)
     broken = np.where(lines.stop_sign[rows], np.isfinite(when), red)

@@ -316,9 +316,11 @@ def speed_independence(
     the closing speed (velocities scale, the geometry does not). A cell whose ratio varies
     by ``limit`` or more gets a verdict (``SPEED_VERDICTS``): ``multi-impact`` if the
     closing speeds with a single-impulse sequence vary by less than the limit among
-    themselves; ``restitution law`` if measured / planar model varies by less than the
-    limit (the planar model takes the world's e(v) at the same normal closing speed, so its
-    ratio to Eq. 1 moves with e(v) only); otherwise ``unexplained``.
+    themselves (or are fewer than two) and the first impulse / planar model varies by
+    less than the limit across all speeds; ``restitution law`` if measured / planar model
+    varies by less than the limit (the planar model takes the world's e(v) at the same
+    normal closing speed, so its ratio to Eq. 1 moves with e(v) only); otherwise
+    ``unexplained``.
 
     Args:
         rows: measured sweep rows (with ``cell`` and ``closing_speed``).
@@ -352,7 +354,11 @@ def speed_independence(
         variation_first = _variation(column(group, "dv_first_a") / column(group, "dv_planar_a"))
         if variation < limit:
             verdict = "steady"
-        elif not (variation_single >= limit):  # also with fewer than two single-impulse speeds
+        elif not (variation_single >= limit) and variation_first < limit:
+            # The single-impulse speeds agree (or there are fewer than two of them) and the
+            # first impulse agrees with the planar model at every speed: the variation is
+            # in the later hits. Without the second condition a cell with fewer than two
+            # single-impulse speeds would be "multi-impact" on no evidence.
             verdict = "multi-impact"
         elif variation_planar < limit:
             verdict = "restitution law"

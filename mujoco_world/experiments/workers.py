@@ -73,7 +73,8 @@ def deferred_interrupts() -> Iterator[None]:
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        # None: a handler set outside Python; the default is the closest we can restore.
+        signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
         if received:
             signal.raise_signal(signal.SIGINT)
 

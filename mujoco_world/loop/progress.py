@@ -79,8 +79,12 @@ def blocked_way(world: World, lookahead: float, margin: float) -> bool:
         cx, cy = rectangle_corners(x, y, world.yaws[others], world.lengths[others], world.widths[others])
         bodies = shapely.polygons(np.stack([cx, cy], axis=-1))
         free = free.difference(shapely.union_all(shapely.buffer(bodies, reach)))
-    s_ego = world.ego_progress()
-    target = min(s_ego + 0.5 * float(world.lengths[0]) + lookahead, path.length)
+    front = world.ego_progress() + 0.5 * float(world.lengths[0])
+    # The shrunk drivable area ends ``reach`` before the road's end: a cross-section
+    # beyond that never meets it, and an ego near the end would read "blocked".
+    target = min(front + lookahead, path.length - reach - 0.01)
+    if target <= front:
+        return False  # the road ends ahead: nothing can block the way
     offsets = environment.lane_offsets
     side = np.array([min(offsets) - environment.lane_width, max(offsets) + environment.lane_width])
     tx, ty = path.to_cartesian(np.full(2, target), side)

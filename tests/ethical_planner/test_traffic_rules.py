@@ -169,3 +169,49 @@ def test_a_stop_sign_is_stopped_at_then_passed():
     assert _front_end(planner.plan(rolling, [], now=5.2)) > 61.0
     planner.reset()
     assert _front_end(planner.plan(rolling, [], now=5.2)) < 60.0
+
+
+def test_a_braking_candidate_that_stops_beyond_the_horizon_keeps_the_red_light():
+    """Review of stop 19: from 20 m/s, 45 m before a red line, the stop-line candidate
+    brakes at about 4.7 m/s^2 and stops after the 3 s horizon; the end-state test used
+    3 m/s^2 and called it a crossing (level 4), so the planner braked at -7.5 m/s^2."""
+    start = _start(20.0)
+    t = np.arange(31) * 0.1
+    part = _stop_target_motion(start, t, SamplingConfig(), VEHICLE, np.array([44.0]), 0.5)
+    b = float(part.deceleration[0])
+    front = part.lon[0][:1]
+    end_speed = part.lon[1][:1, -1]
+    gap = 44.0 - front[0, -1]
+    # By hand: it still moves at the horizon, and 3 m/s^2 cannot stop it in the gap left,
+    # its own braking can (it stops at exactly 44 m).
+    assert end_speed[0] > 5.0 and end_speed[0] ** 2 / 6.0 > gap > end_speed[0] ** 2 / (2 * b) - 1e-6
+    line = np.array([44.0 + 1e-6])
+    assert np.isfinite(crossing_times(front, end_speed, t, line, 3.0)[0, 0])  # the old test
+    assert crossing_times(front, end_speed, t, line, 3.0, np.array([b]))[0, 0] == np.inf
+
+
+def test_the_planner_brakes_no_harder_than_needed_for_a_far_red_light():
+    ego = KinematicState(x=10.0, y=0.0, yaw=0.0, v=20.0)
+    front = 10.0 + 0.5 * EGO_SHAPE.length
+    line = StopLine(front + 45.0, ((0.0, 30.0),))
+    planner = Planner(preset("ethical"), _road((line,)))
+    decision = planner.plan(ego, [], now=0.0)
+    assert decision.level == Validity.VALID
+    # v^2 / (2 * 44 m) = 4.55 m/s^2 stops 1 m before the line; the emergency 8 is not needed.
+    assert decision.trajectory.a.min() > -6.0
+
+
+def test_an_amber_release_only_for_an_ego_that_clears_the_line_before_the_red():
+    # 20 m/s, 50 m before a light turning red at 10 s: comfortable stop needs about 68 m.
+    before_red = _lines([StopLine(50.0, ((10.0, 20.0),))], 0.0, 20.0, now=8.0)  # arrives 10.5 s
+    assert before_red.binding[0]  # it would cross in the red: full braking (about 27 m) binds
+    in_time = _lines([StopLine(50.0, ((10.0, 20.0),))], 0.0, 20.0, now=7.0)  # arrives 9.5 s
+    assert not in_time.binding[0]  # amber dilemma zone: it clears the line before the red
+    # Stepping across the red onset changes nothing for an ego that would arrive in the red.
+    assert _lines([StopLine(50.0, ((10.0, 20.0),))], 0.0, 20.0, now=10.0).binding[0]
+
+
+def test_a_light_whose_red_is_over_does_not_bind_beside_one_with_more_windows():
+    lines = [StopLine(100.0, ((0.0, 5.0),)), StopLine(200.0, ((0.0, 5.0), (50.0, 60.0)))]
+    assert list(_lines(lines, 0.0, 10.0, now=20.0).binding) == [False, True]
+    assert not _lines([StopLine(100.0, ())], 0.0, 10.0).binding[0]  # a light that is never red

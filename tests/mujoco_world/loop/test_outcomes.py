@@ -37,6 +37,21 @@ def test_standing_on_an_empty_road_is_no_progress():
     assert outcome == "no_progress" and "passage of its width open" in reason
 
 
+def test_standing_near_the_road_end_with_the_way_open_is_no_progress():
+    """Review of stop 19: the cross-section 20 m ahead lay beyond the end of the shrunk
+    drivable area (it ends half a width + 0.25 m before the road's end), so an ego
+    standing on an empty road 18 m before its end read as a safe stop."""
+    data = {
+        "name": "t",
+        "road": {"length": 100.0},
+        "ego": {"s0": 80.0, "speed": 0.0, "goal_s": 98.0},
+        "duration": 6.0,
+    }
+    scenario = scenario_from_dict(data)
+    outcome, reason = _outcome(scenario)
+    assert outcome == "no_progress" and "passage of its width open" in reason
+
+
 def test_standing_behind_a_car_with_the_other_lane_free_is_no_progress():
     # One car across lane 0 (y = -1.75 m, 1.8 m wide), grown by the ego's half width 0.805 m
     # + 0.25 m, covers y in [-3.7, 0.2]; the road's 8 m shrunk by 1.055 m per side leaves
