@@ -535,12 +535,17 @@ class TrafficRulesConfig:
         stop_gap: the front stops this far before the line [m] (stop-line candidates).
         min_deceleration: stop-line candidates brake at least this hard [m/s^2]; a line
             further away than that stop gets none (the grid reaches it later).
+        red_margin: each red window is widened by this much on both sides when a plan
+            is judged [s]: the world's ego does not cross exactly when planned (a
+            random red_light_for_ego variant planned to cross 0.0 s after the green
+            and crossed 13 ms before it, a violation). 0.5 s at 8 m/s is 4 m.
     """
 
     enabled: bool = True
     comfortable_deceleration: float = 3.0
     stop_gap: float = 1.0
     min_deceleration: float = 0.5
+    red_margin: float = 0.5
 
     def __post_init__(self) -> None:
         enabled = self.enabled
@@ -550,7 +555,7 @@ class TrafficRulesConfig:
             comfortable_deceleration=self.comfortable_deceleration,
             min_deceleration=self.min_deceleration,
         )
-        check_non_negative("traffic_rules", stop_gap=self.stop_gap)
+        check_non_negative("traffic_rules", stop_gap=self.stop_gap, red_margin=self.red_margin)
 
 
 @dataclass(frozen=True, slots=True)

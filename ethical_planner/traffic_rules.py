@@ -95,6 +95,9 @@ class StopLines:
         for i, line in enumerate(lines):  # a few lines, a few windows
             if line.red:
                 red[i, : len(line.red)] = line.red
+        # Widened by the margin (config), so that a plan keeps clear of the red's edges.
+        red[:, :, 0] -= rules.red_margin
+        red[:, :, 1] += rules.red_margin
         s = np.array([line.s for line in lines], dtype=float)
         sign = np.array([line.stop for line in lines], dtype=bool)
         real = np.isfinite(red[:, :, 1])  # padding windows are (inf, inf)

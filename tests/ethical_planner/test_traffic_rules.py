@@ -12,7 +12,7 @@ from ethical_planner.traffic_rules import StopLines, breaks_stop_lines, crossing
 from ethical_planner.validity import Validity
 
 VEHICLE = VehicleConfig()  # emergency 8 m/s^2, jerk 30 m/s^3
-RULES = TrafficRulesConfig()  # comfortable 3 m/s^2
+RULES = TrafficRulesConfig(red_margin=0.0)  # comfortable 3 m/s^2; windows as written
 
 
 def _start(v: float, a: float = 0.0, s: float = 0.0) -> FrenetState:
@@ -215,3 +215,24 @@ def test_a_light_whose_red_is_over_does_not_bind_beside_one_with_more_windows():
     lines = [StopLine(100.0, ((0.0, 5.0),)), StopLine(200.0, ((0.0, 5.0), (50.0, 60.0)))]
     assert list(_lines(lines, 0.0, 10.0, now=20.0).binding) == [False, True]
     assert not _lines([StopLine(100.0, ())], 0.0, 10.0).binding[0]  # a light that is never red
+
+
+def test_a_plan_keeps_clear_of_the_red_by_the_margin():
+    """A random red_light_for_ego variant (s0-29) planned to cross as the red ended and
+    crossed 13 ms early; with the default 0.5 s margin such a plan breaks the rule."""
+    t = np.arange(31) * 0.1
+    front = 10.0 * t[None, :]  # crosses 15 m at 1.5 s
+    v = np.array([10.0])
+
+    def broken(red, margin):
+        rules = TrafficRulesConfig(red_margin=margin)
+        lines = StopLines.of((StopLine(15.0, red),), _start(0.0), 0.0, 0.0, np.zeros(1, bool), VEHICLE, rules)
+        return bool(breaks_stop_lines(front, v, t, lines, 3.0)[0])
+
+    assert not broken(((0.0, 1.45),), 0.0)  # 0.05 s after the red
+    assert broken(((0.0, 1.45),), 0.5)
+    assert not broken(((0.0, 0.95),), 0.5)  # 0.55 s after it
+    assert broken(((1.9, 5.0),), 0.5)  # 0.4 s before the next red
+    assert not broken(((2.05, 5.0),), 0.5)
+    with pytest.raises(ValueError, match="red_margin"):
+        TrafficRulesConfig(red_margin=-0.1)
