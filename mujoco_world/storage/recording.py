@@ -55,6 +55,9 @@ Entities (all in the world frame, z up, road plane z = 0):
   road user with no value in a flush interval is not written for that interval.
 * ``world/impacts/<n>/{point,force}`` and ``impacts/<n>/<body>/{dv_measured,
   dv_predicted,harm_measured,harm_predicted}``, plus an ``impacts`` TextLog.
+* ``world/stop_lines/<name>``: each stop line across the road, red while its light
+  is red and green otherwise (the colour changes at the red windows' edges); a stop
+  sign's line is white.
 * ``sight`` (TextLog): a road user's name and type the moment the planner first
   perceives it (``World.first_seen``; sensor range, field of view, occlusion).
 
@@ -139,6 +142,8 @@ LEVEL_COLORS: dict[int, tuple[int, int, int, int]] = {
 }
 _ELLIPSE_POINTS = 25
 _Z_LINE = 0.05  # lines slightly above the road surface [m]
+#: Stop-line colours: a light red, a light not red, a stop sign.
+_RED, _GREEN, _STOP_SIGN = (230, 40, 40), (60, 200, 90), (245, 245, 245)
 _Z_GONE = -50.0  # height of bodies out of the world: out of sight below the road [m]
 
 
@@ -590,6 +595,7 @@ class RerunRecorder(RunObserver):
                 ),
                 static=True,
             )
+        self._log_stop_lines(world, scenario)
         rec.log(
             "run",
             rr.TextDocument(
@@ -632,6 +638,32 @@ class RerunRecorder(RunObserver):
             rr.SeriesPoints(names=[f"family ({families})"], marker_sizes=[3.0]),
             static=True,
         )
+
+    def _log_stop_lines(self, world: World, scenario: Scenario) -> None:
+        """``world/stop_lines/<name>``: each line across the road, red while its light is red.
+
+        The red windows are known at the start, so each colour change is logged at its
+        own time; a stop sign is drawn white all run.
+        """
+        if not scenario.stop_lines:
+            return
+        rec = self._stream()
+        environment = world.environment()
+        offsets = np.asarray(environment.lane_offsets, dtype=float)
+        half = 0.5 * environment.lane_width
+        across = np.array([offsets.min() - half, offsets.max() + half])
+        for line in scenario.stop_lines:  # a few lines, a few windows
+            x, y = environment.reference_path.to_cartesian(np.full(2, line.s), across)
+            strip = _to3(np.column_stack([x, y]))
+            path = f"world/stop_lines/{line.name}"
+            label = f"{line.name} ({'stop sign' if line.stop else 'traffic light'})"
+            edges = sorted({0.0, *(max(t, 0.0) for window in line.red for t in window)})
+            for t in edges:
+                red = any(start <= t < end for start, end in line.red)
+                color = _STOP_SIGN if line.stop else _RED if red else _GREEN
+                rec.set_time("sim_time", duration=t)
+                rec.log(path, rr.LineStrips3D([strip], colors=[color], radii=0.2, labels=[label]))
+        rec.set_time("sim_time", duration=world.time)
 
     def _log_body_shapes(self) -> None:
         """Sizes, colours and labels once, as static data; frames then carry poses only."""

@@ -477,3 +477,24 @@ def test_ttc_is_a_time_within_the_horizon_or_nan(hidden_pedestrian_run):
     assert finite.any() and (~finite).any()  # approaching and not, in this run
     assert np.all(np.isnan(values[~finite]))  # "none within the horizon" is nan, never inf
     assert np.all((values[finite] >= 0.0) & (values[finite] <= RecorderConfig().ttc_horizon))
+
+
+def test_a_stop_line_is_drawn_across_the_road_red_while_its_light_is_red(tmp_path):
+    scenario = dataclasses.replace(get_scenario("red_light_for_ego"), duration=1.0)
+    (line,) = scenario.stop_lines
+    assert line.red == ((0.0, 9.0),)
+    recorder = RerunRecorder(tmp_path / "light", RecorderConfig(candidates=0))
+    run_scenario(scenario, "keep_lane", 0, observer=recorder)
+    batches = read_chunks(recorder.path)["/world/stop_lines/light"]
+    times, colors = column(batches, "LineStrips3D:colors")
+    assert list(times) == [0.0, 9.0]  # red from the start, green at 9 s
+    red, green = 0xE62828FF, 0x3CC85AFF  # RGBA of (230, 40, 40) and (60, 200, 90)
+    assert [c[0] for c in colors] == [red, green]
+    _, strips = column(batches, "LineStrips3D:strips")
+    ends = np.array(strips[0][0])
+    # Across the straight road along +x, line.s - ego.s0 ahead of the ego's start (its
+    # logged centre), over both lanes (3.5 m each, the ego in the right one).
+    _, centers = column(read_chunks(recorder.path)["/world/ego"], "Boxes3D:centers")
+    start_x, start_y = centers[0][0][:2]
+    assert ends[:, 0] == pytest.approx(np.full(2, start_x + line.s - scenario.ego.s0), abs=0.05)
+    assert sorted(ends[:, 1] - start_y) == pytest.approx([-1.75, 5.25], abs=0.05)
