@@ -83,6 +83,16 @@ def _brute_force(args, harm_obs, harm_ego, epsilon):
     return risk_obs, risk_ego, worst_obs, worst_ego, peak, onset
 
 
+def _assert_equals_brute_force(result, expected, onset):
+    """``risk_maximum``'s result equals ``_brute_force``'s (every triple evaluated), bit for bit."""
+    names = ("risk_obs", "risk_ego", "maximin_harm_obs", "maximin_harm_ego")
+    for name, reference in zip(names, expected[:4], strict=True):
+        np.testing.assert_array_equal(getattr(result, name), reference, err_msg=name)
+    if onset:
+        np.testing.assert_array_equal(result.peak_probability, expected[4])
+        np.testing.assert_array_equal(result.onset_step, expected[5])
+
+
 @pytest.mark.parametrize("seed", range(6))
 @pytest.mark.parametrize("onset", [False, True])
 def test_risk_maximum_equals_evaluating_every_triple(seed, onset):
@@ -100,12 +110,7 @@ def test_risk_maximum_equals_evaluating_every_triple(seed, onset):
     result = risk_maximum(tables, rows, flat, harm_obs.ravel()[flat], harm_ego.ravel()[flat], epsilon, onset)
     assert 0 < result.integrals < result.triples == flat.size  # something skipped, something not
     assert expected[0].max() > 1e-3 and (expected[4] > epsilon).any()  # informative scenes
-    names = ("risk_obs", "risk_ego", "maximin_harm_obs", "maximin_harm_ego")
-    for name, reference in zip(names, expected[:4], strict=True):
-        np.testing.assert_array_equal(getattr(result, name), reference, err_msg=name)
-    if onset:
-        np.testing.assert_array_equal(result.peak_probability, expected[4])
-        np.testing.assert_array_equal(result.onset_step, expected[5])
+    _assert_equals_brute_force(result, expected, onset)
     # Two threads split the pairs; the numbers stay the same.
     threaded = risk_maximum(
         tables, rows, flat, harm_obs.ravel()[flat], harm_ego.ravel()[flat], epsilon, onset, Workers(2)
@@ -167,12 +172,7 @@ def test_risk_maximum_of_a_mixture_equals_evaluating_every_triple(seed, onset):
     result = risk_maximum(tables, rows, flat, harm_obs.ravel()[flat], harm_ego.ravel()[flat], epsilon, onset)
     assert 0 < result.integrals < result.triples == flat.size
     assert expected[0].max() > 1e-3 and (expected[4] > epsilon).any()
-    names = ("risk_obs", "risk_ego", "maximin_harm_obs", "maximin_harm_ego")
-    for name, reference in zip(names, expected[:4], strict=True):
-        np.testing.assert_array_equal(getattr(result, name), reference, err_msg=name)
-    if onset:
-        np.testing.assert_array_equal(result.peak_probability, expected[4])
-        np.testing.assert_array_equal(result.onset_step, expected[5])
+    _assert_equals_brute_force(result, expected, onset)
 
 
 def test_mixture_tables_refuse_weights_that_do_not_match_the_gaussians():
