@@ -278,7 +278,7 @@ def speed_ratio(out_dir: Path, check: dict[str, Any]) -> str:
         ax.set_ylabel("measured / Eq. 1 delta-v\nof the ego (whole sequence)")
     labels = {
         "steady": f"steady: spread below {check['limit']:.0%} (partner colour)",
-        "multi-impact": "multi-impact: steady over the single-impulse speeds",
+        "multi-impact": "multi-impact: single-impulse speeds and first impulse / planar steady",
         "restitution law": "restitution law: measured / planar model steady",
         "unexplained": "unexplained",
     }
