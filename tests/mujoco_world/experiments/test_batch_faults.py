@@ -35,6 +35,19 @@ REPO = Path(__file__).resolve().parents[3]
 faults.register()
 
 
+@pytest.fixture(autouse=True)
+def ctrl_c_raises():
+    """Ctrl-C as at a terminal, also when pytest runs where SIGINT is ignored.
+
+    A background job of a non-interactive shell (``python -m pytest &``) starts with
+    SIGINT ignored, and so would every ``etp demo`` these tests start: a Python handler
+    here is reset to the default on exec, so the children get Python's own again.
+    """
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+
+
 def _tasks(scenario, out, planners, seeds=(0,)):
     return [RunTask(scenario, p, s, str(out), record=False) for p in planners for s in seeds]
 
