@@ -71,6 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_json(p)
     _predictor_argument(p)
+    _post_crash_argument(p)
     _recording_arguments(p)
     p.set_defaults(handler=_run)
 
@@ -125,6 +126,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_json(p)
     _predictor_argument(p)
+    _post_crash_argument(p)
     _recording_arguments(p)
     p.set_defaults(handler=_demo)
 
@@ -135,6 +137,17 @@ def _predictor_argument(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="predictor of the planner (constant_acceleration, constant_turn_rate, learned; "
         "default: the planner configuration's)",
+    )
+
+
+def _post_crash_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--post-crash",
+        choices=["brake", "continue"],
+        default=None,
+        help="what the ego does after its first contact, replacing each scenario's ego.post_crash: "
+        "brake to rest, or continue replanning and tracking its plans (the controller is cut only "
+        "inside impact pulses); default: the scenario's (brake unless it says otherwise)",
     )
 
 
@@ -170,7 +183,7 @@ def _run_config(args: argparse.Namespace, **fields: object):  # noqa: ANN202 - R
 
     if args.predictor is not None:
         PREDICTORS.get(args.predictor)  # raises ValueError listing the registered predictors
-    return RunConfig(predictor=args.predictor, **fields)
+    return RunConfig(predictor=args.predictor, post_crash=args.post_crash, **fields)
 
 
 def _recording_arguments(parser: argparse.ArgumentParser) -> None:
@@ -352,7 +365,7 @@ def _demo(args: argparse.Namespace) -> int:
 
     tasks = _demo_tasks(args)
     root = output_dir(args.out)
-    config = _run_config(args) if args.predictor is not None else None
+    config = _run_config(args) if args.predictor is not None or args.post_crash is not None else None
     start = time.perf_counter()
     interrupted = None
     try:

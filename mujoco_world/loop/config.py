@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ethical_planner.validation import check, check_positive
+from ethical_planner.validation import check, check_positive, parse_enum
 from mujoco_world.loop.progress import StallConfig
 from mujoco_world.loop.world import ObservationNoise
 from mujoco_world.physics.control import ControlConfig
+from mujoco_world.scenario.spec import PostCrashPolicy
 
 
 @dataclass(frozen=True, slots=True)
@@ -31,6 +32,8 @@ class RunConfig:
             configuration's ``[prediction] model`` (None keeps it).
         stall: at the time limit, what counts as a standing ego and a blocked way
             (outcomes ``timeout``, ``stopped_safely``, ``no_progress``; ``loop.progress``).
+        post_crash: what the ego does after its first contact (``PostCrashPolicy``),
+            replacing the scenario's ``ego.post_crash``; None keeps the scenario's.
     """
 
     replan_rate: float = 10.0
@@ -46,8 +49,12 @@ class RunConfig:
     control: ControlConfig = field(default_factory=ControlConfig)
     predictor: str | None = None
     stall: StallConfig = field(default_factory=StallConfig)
+    post_crash: PostCrashPolicy | None = None
 
     def __post_init__(self) -> None:
+        if self.post_crash is not None:
+            policy = parse_enum(PostCrashPolicy, self.post_crash, "post-crash policy", "run.post_crash")
+            object.__setattr__(self, "post_crash", policy)
         check_positive(
             "run",
             replan_rate=self.replan_rate,

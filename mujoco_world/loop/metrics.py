@@ -181,7 +181,11 @@ class PlannedCollisionProbability(Metric):
 
 
 class MinDistance(Metric):
-    """Smallest ego-to-road-user geom distance until the ego's first contact.
+    """Smallest ego-to-road-user geom distance while the ego drives on its plans.
+
+    That is until the ego's first contact under the ``brake`` post-crash policy, and
+    the whole run under ``continue`` (``World.ego_on_plan``): how closely the ego
+    passed a pedestrian after scraping a wall is what that policy is about.
 
     Values: ``min_distance`` and ``min_distance_vulnerable`` [m] (negative: overlap;
     nan if there was none to measure), and ``clearance_vulnerable``: the smallest
@@ -205,7 +209,7 @@ class MinDistance(Metric):
     def sample(self, run: RunState) -> None:
         """``mj_geomDistance`` from the ego to every road user."""
         world = run.world
-        if world.n < 2 or world.crashed[0]:
+        if world.n < 2 or not world.ego_on_plan:
             return
         dist = world.ego_distances(DISTANCE_CAP)
         self.closest = min(self.closest, float(dist.min()))

@@ -145,7 +145,12 @@ class ClosedLoop:
         self.wall_start = time.perf_counter()
         self.config, self.observer, self.crash = config, observer, crash
         world = World(
-            scenario, config.control, 1.0 / config.behaviour_rate, config.timestep, config.control_interval
+            scenario,
+            config.control,
+            1.0 / config.behaviour_rate,
+            config.timestep,
+            config.control_interval,
+            post_crash=config.post_crash,
         )
         ego = scenario.ego
         shape = Shape(ego.length, ego.width)
@@ -258,7 +263,10 @@ class ClosedLoop:
     def _step(self) -> Stop | None:
         """One physics step (and a planning cycle when due); the stop verdict, if any."""
         run, world = self.run, self.world
-        if run.step % self.steps_per_cycle == 0 and not world.crashed[0]:
+        # Plans drive the ego while it is on them (``World.ego_on_plan``: before its first
+        # contact, and after it under the ``continue`` policy, replanned at once from
+        # the measured state when the ego comes out of an impact pulse).
+        if world.ego_on_plan and (run.step % self.steps_per_cycle == 0 or world.ego_left_pulse):
             self._plan()
         ended = world.step()
         run.step += 1

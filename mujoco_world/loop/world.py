@@ -23,7 +23,7 @@ from ethical_planner.environment import RoadEnvironment
 from ethical_planner.geometry import rectangle_overlap
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
-from ethical_planner.validation import check_non_negative
+from ethical_planner.validation import check_non_negative, parse_enum
 from mujoco_world.agents.behaviour import Fleet, WorldView
 from mujoco_world.physics.control import (
     GRAVITY,
@@ -37,7 +37,15 @@ from mujoco_world.physics.scene import BodyProxy, Scene
 from mujoco_world.physics.sight import Boxes, blocked, in_field_of_view, target_points
 from mujoco_world.scenario.recorded_tracks import RECORDED_ACCEL_CAP, RecordedTracks
 from mujoco_world.scenario.road import StaticBox, box_footprint, build_road, debris_boxes
-from mujoco_world.scenario.spec import BehaviourKind, Boundary, RoadKind, RoadName, RouteSpec, Scenario
+from mujoco_world.scenario.spec import (
+    BehaviourKind,
+    Boundary,
+    PostCrashPolicy,
+    RoadKind,
+    RoadName,
+    RouteSpec,
+    Scenario,
+)
 
 #: Where bodies that are not in the world (yet, or any more) wait [m]: far from every
 #: road and from each other, without contacts.
@@ -102,6 +110,15 @@ class World:
         history_length: samples kept per body (the current one included).
         ego_present: False builds the world without its ego (the ego's body waits
             outside, without contacts): a replay of the road users alone.
+        post_crash: what the ego's controller does after its first contact
+            (``PostCrashPolicy``); None is the scenario's ``ego.post_crash``.
+
+    Controllers after contact: inside an impact pulse (``ImpactRecorder.in_pulse``) a
+    body's controller force is zero, so the measured delta-v is the contact's alone.
+    Outside pulses a road user that has touched something brakes to rest
+    (``brake_forces``: it is out of the traffic); the ego brakes too under the
+    ``brake`` policy, or keeps tracking the planner's plans under ``continue``
+    (``ego_on_plan``).
 
     Raises:
         ValueError: the scenario places bodies overlapping at the start or routes
@@ -118,6 +135,7 @@ class World:
         history_step: float = 0.1,
         history_length: int = 31,
         ego_present: bool = True,
+        post_crash: PostCrashPolicy | str | None = None,
     ) -> None:
         if not (isinstance(control_interval, int) and control_interval >= 1):
             raise ValueError(f"control_interval must be an integer >= 1, got {control_interval!r}")
@@ -131,6 +149,12 @@ class World:
             )
         self.scenario = scenario
         self.control = control or ControlConfig()
+        #: What the ego's controller does after its first contact.
+        self.post_crash = (
+            scenario.ego.post_crash
+            if post_crash is None
+            else parse_enum(PostCrashPolicy, post_crash, "post-crash policy", "post_crash")
+        )
         self.road = build_road(scenario.road)
         ego = scenario.ego
         if scenario.road.kind is RoadKind.MAP:
@@ -240,6 +264,8 @@ class World:
             pk,
         )
         self.crashed = np.zeros(self.n, dtype=bool)
+        #: True after a step in which the ego came out of an impact pulse (the loop replans then).
+        self.ego_left_pulse = False
         #: Pose (x, y, yaw) where each body last left the world, (n, 3) (nan if it never left).
         self.exit_pose = np.full((self.n, 3), math.nan)
         self.ego_crash_time: float | None = None
@@ -616,8 +642,17 @@ class World:
 
     # ------------------------------------------------------------------ stepping
 
+    @property
+    def ego_on_plan(self) -> bool:
+        """True while the ego's controller tracks the planner's plans.
+
+        Before the ego's first contact, and after it under the ``continue`` policy
+        (outside impact pulses the plan is tracked, inside them the force is zero).
+        """
+        return bool(self.present[0]) and (not self.crashed[0] or self.post_crash is PostCrashPolicy.CONTINUE)
+
     def set_ego_plan(self, plan: TrajectoryReference) -> None:
-        """Track ``plan`` from now on (until the ego's first contact)."""
+        """Track ``plan`` from now on (while ``ego_on_plan``)."""
         self.ego_plan = plan
 
     def _update_controls(self, t: float) -> None:
@@ -641,12 +676,14 @@ class World:
                 self._user_track_sq[following] += err * err
                 self._user_track_n[following] += 1
                 np.maximum.at(self._user_track_max, np.flatnonzero(following), err)
-        if not self.crashed[0] and self.present[0]:
+        ego_on_plan = self.ego_on_plan
+        if ego_on_plan:
             p, v, a, yaw, rate = self.ego_plan.sample(t)
-            err = math.hypot(scene.qpos[0, 0] - p[0], scene.qpos[0, 1] - p[1])
-            self._track_sq += err * err
-            self._track_n += 1
-            self._track_max = max(self._track_max, err)
+            if not self.crashed[0]:
+                err = math.hypot(scene.qpos[0, 0] - p[0], scene.qpos[0, 1] - p[1])
+                self._track_sq += err * err
+                self._track_n += 1
+                self._track_max = max(self._track_max, err)
             p_ref[0], v_ref[0], a_ref[0], yaw_ref[0], rate_ref[0] = p, v, a, yaw, rate
         ctrl = tracking_forces(
             self.control,
@@ -662,11 +699,16 @@ class World:
             self.accel_limit,
         )
         if self.crashed.any():
-            rows = np.flatnonzero(self.crashed)
-            brake = brake_forces(self.control, scene.masses[rows], scene.yaw_inertia[rows], scene.qvel[rows])
-            # No braking during a crash pulse: it would contaminate the measured delta-v.
-            brake[self.recorder.in_pulse[rows]] = 0.0
-            ctrl[rows] = brake
+            braking = self.crashed.copy()
+            braking[0] &= not ego_on_plan
+            rows = np.flatnonzero(braking)
+            if rows.size:
+                ctrl[rows] = brake_forces(
+                    self.control, scene.masses[rows], scene.yaw_inertia[rows], scene.qvel[rows]
+                )
+            # No controller force inside an impact pulse (a body in one has touched
+            # something, so it is crashed): it would contaminate the measured delta-v.
+            ctrl[self.recorder.in_pulse] = 0.0
         if not self.present.all():
             ctrl[~self.present] = 0.0
         scene.ctrl[:] = ctrl
@@ -745,7 +787,8 @@ class World:
         """One physics step: behaviours, controllers, ``mj_step``, impact measurement.
 
         Controls are recomputed every ``control_interval`` steps (held in between),
-        and every step once a body has crashed.
+        and every step once a body has crashed. ``ego_left_pulse`` says whether the ego
+        came out of an impact pulse in this step.
 
         Returns:
             The collision episodes that ended in this step.
@@ -759,7 +802,9 @@ class World:
         self._control_countdown -= 1
         recorder = self.recorder
         t_physics = clock()
+        was_in_pulse = bool(recorder.in_pulse[0])
         done = scene.step(recorder)  # physics and impact measurement, sub-stepped in impacts
+        self.ego_left_pulse = was_in_pulse and not recorder.in_pulse[0]
         self._steps += 1
         if self._steps % self._history_interval == 0:
             self._sample_history()

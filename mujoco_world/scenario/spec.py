@@ -164,6 +164,26 @@ class Boundary(StrEnum):
     NONE = "none"
 
 
+class PostCrashPolicy(StrEnum):
+    """What the ego's controller does after its first contact (``[ego] post_crash``).
+
+    Inside an impact pulse (``ImpactRecorder.in_pulse``) every body's controller force is
+    zero under either policy, so a measured delta-v is the contact's alone. Between and
+    after pulses:
+
+    ``brake``: the ego stops following plans and brakes to rest at up to mu g, as a
+    multi-collision brake does (the default: it keeps the catalog's outcomes as they
+    were, and a crashed ego coming to rest ends the run as ``crash`` at rest).
+    ``continue``: the ego's planner keeps replanning from the measured state and the
+    ego keeps tracking its plans (an automated vehicle that scrapes a wall keeps
+    braking and steering). Other road users brake to rest after their first contact
+    under both policies.
+    """
+
+    BRAKE = "brake"
+    CONTINUE = "continue"
+
+
 class RoadName(StrEnum):
     """Which road a route follows; ``waypoints`` gives it explicitly."""
 
@@ -795,6 +815,8 @@ class EgoSpec:
             one of them (instead of at ``goal_s``).
         goal_time: a goal of time only: reached when the run has lasted this long [s]
             (not with ``goal_region``).
+        post_crash: what the ego does after its first contact (``PostCrashPolicy``:
+            "brake" or "continue").
     """
 
     type: RoadUserType = RoadUserType.CAR
@@ -810,9 +832,15 @@ class EgoSpec:
     pose: tuple[float, float, float] | None = None
     goal_region: tuple[Points, ...] = ()
     goal_time: float | None = None
+    post_crash: PostCrashPolicy = PostCrashPolicy.BRAKE
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "type", parse_enum(RoadUserType, self.type, "road-user type", "ego.type"))
+        object.__setattr__(
+            self,
+            "post_crash",
+            parse_enum(PostCrashPolicy, self.post_crash, "post-crash policy", "ego.post_crash"),
+        )
         if self.pose is not None:
             try:
                 x, y, yaw = (float(v) for v in self.pose)

@@ -1,0 +1,209 @@
+"""Control after contact: the post-crash policy (``[ego] post_crash``, issue 15).
+
+Inside an impact pulse no controller force acts; outside pulses a crashed ego keeps
+tracking its plans under ``continue`` and brakes to rest under ``brake``.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from mujoco_world.agents.ego_planner import Plan
+from mujoco_world.loop.config import RunConfig
+from mujoco_world.loop.metrics import Metric, default_metrics
+from mujoco_world.loop.runner import closed_loop, run_scenario
+from mujoco_world.loop.world import World
+from mujoco_world.physics.control import GRAVITY, TrajectoryReference, tracking_forces
+from mujoco_world.scenario.spec import PostCrashPolicy, load_scenario, scenario_from_dict
+
+SPEED = 15.0  # [m/s]
+
+
+def rear_end(policy=None, duration=20.0):
+    """The ego at 15 m/s behind a parked car 30 m ahead, in its lane."""
+    ego = {"s0": 10.0, "speed": SPEED, "goal_s": 290.0}
+    if policy is not None:
+        ego["post_crash"] = policy
+    return scenario_from_dict(
+        {
+            "name": "rear_end",
+            "road": {"length": 300.0},
+            "ego": ego,
+            "duration": duration,
+            "road_users": [{"name": "parked", "type": "car", "s0": 40.0, "behaviour": {"kind": "parked"}}],
+        }
+    )
+
+
+def cruise(world, speed=SPEED, accel=0.0, horizon=30.0):
+    """A plan along the ego's lane from where it is now, at ``speed`` plus ``accel`` [m/s^2] t."""
+    x, y = world.positions[0]
+    t = np.arange(0.0, horizon + 1e-9, 0.1)
+    zeros = np.zeros_like(t)
+    return TrajectoryReference(
+        world.time,
+        t,
+        x + speed * t + 0.5 * accel * t**2,
+        np.full_like(t, y),
+        zeros,
+        speed + accel * t,
+        np.full_like(t, accel),
+        zeros,
+    )
+
+
+def drive_with_spy(world, seconds):
+    """Step ``world`` with a fixed plan; per physics step the controls it applied.
+
+    Returns:
+        rows of (t [s], ego in a pulse, ego crashed, ego ctrl (3,), ego qpos (3,), ego qvel (3,)),
+        taken when the physics step starts (after the controls were set), and the
+        measured collisions.
+    """
+    rows = []
+    scene = world.scene
+    physics_step = scene.step
+
+    def spy(observer=None):
+        rows.append(
+            (
+                world.time,
+                bool(world.recorder.in_pulse[0]),
+                bool(world.crashed[0]),
+                scene.ctrl[0].copy(),
+                scene.qpos[0].copy(),
+                scene.qvel[0].copy(),
+            )
+        )
+        return physics_step(observer)
+
+    scene.step = spy
+    measured = []
+    for _ in range(int(round(seconds / scene.dt))):
+        measured += world.step()
+    return rows, measured
+
+
+def test_continue_cuts_the_controller_only_inside_impact_pulses():
+    world = World(rear_end("continue"))
+    assert world.post_crash is PostCrashPolicy.CONTINUE
+    plan = cruise(world, accel=2.0)  # the controller pushes (m 2 m/s^2) up to the contact
+    world.set_ego_plan(plan)
+    rows, measured = drive_with_spy(world, 3.0)
+    assert world.crashed[0] and world.ego_on_plan
+    pulse = [r for r in rows if r[1]]
+    after = [r for r in rows if r[2] and not r[1]]
+    assert len(pulse) >= 10 and len(after) > 300
+    # Inside every pulse: no controller force and no torque.
+    assert all(np.all(r[3] == 0.0) for r in pulse)
+    # Outside pulses after the crash: exactly the tracking force towards the plan.
+    masses, inertia = world.scene.masses[:1], world.scene.yaw_inertia[:1]
+    for t, _, _, ctrl, qpos, qvel in after:
+        p, v, a, yaw, rate = plan.sample(t)
+        expected = tracking_forces(
+            world.control,
+            masses,
+            inertia,
+            qpos[None],
+            qvel[None],
+            p[None],
+            v[None],
+            a[None],
+            np.array([yaw]),
+            np.array([rate]),
+        )[0]
+        np.testing.assert_allclose(ctrl, expected, rtol=1e-12, atol=1e-9)
+    # The ego drives on: it pushes the wreck along at the plan's speed or close to it.
+    assert world.scene.speeds()[0] > 5.0
+    # The measured first impulse is the contact's alone: the centre-of-mass velocity
+    # change from before the first contact to the end of the first pulse (the
+    # controller is on right before and right after it) equals J1 / m within the one
+    # physics step the controller acts before the contact is known (mu g dt).
+    first = measured[0] if measured else world.finish()[0]
+    start = next(i for i, r in enumerate(rows) if r[2])  # first step after the contact began
+    end = next(i for i in range(start, len(rows)) if not rows[i][1])  # first step out of the pulse
+    assert np.linalg.norm(rows[start - 2][3][:2]) == pytest.approx(2.0 * masses[0], rel=0.05)  # on before
+    full = world.control.friction_mu * GRAVITY * masses[0]
+    assert np.linalg.norm(rows[end][3][:2]) == pytest.approx(
+        full
+    )  # and right after the pulse (behind its plan)
+    dv_com = np.linalg.norm(rows[end][5][:2] - rows[start - 2][5][:2])
+    # Equal masses, the struck car at rest: dv = v (1 + e) / 2 (e along the normal).
+    v_before = np.linalg.norm(first.a.velocity)
+    assert first.a.dv_first == pytest.approx(v_before * (1 + first.restitution) / 2, rel=0.02)
+    assert dv_com == pytest.approx(first.a.dv_first, abs=world.control.friction_mu * GRAVITY * world.scene.dt)
+
+
+def test_brake_stops_following_the_plan_and_brakes_outside_pulses():
+    world = World(rear_end())  # brake is the default
+    assert world.post_crash is PostCrashPolicy.BRAKE
+    world.set_ego_plan(cruise(world))
+    rows, _ = drive_with_spy(world, 3.0)
+    assert world.crashed[0] and not world.ego_on_plan
+    pulse = [r for r in rows if r[1]]
+    after = [r for r in rows if r[2] and not r[1]]
+    assert pulse and all(np.all(r[3] == 0.0) for r in pulse)
+    assert len(after) > 1000
+    mass, inertia = world.scene.masses[0], world.scene.yaw_inertia[0]
+    mu_g, tau = world.control.friction_mu * GRAVITY, world.control.brake_time_constant
+    for _, _, _, ctrl, _, qvel in after:
+        speed = math.hypot(qvel[0], qvel[1])
+        decel = min(mu_g, speed / tau)  # brakes at mu g, gently near rest
+        np.testing.assert_allclose(ctrl[:2], -mass * decel * qvel[:2] / max(speed, 1e-9), atol=1e-6)
+        np.testing.assert_allclose(ctrl[2], -inertia * np.clip(qvel[2] / tau, -40.0, 40.0), atol=1e-6)
+    assert world.scene.speeds()[0] < 0.05  # at rest, although the plan goes on at 15 m/s
+
+
+def test_the_run_configuration_replaces_the_scenario_policy():
+    assert World(rear_end("continue"), post_crash="brake").post_crash is PostCrashPolicy.BRAKE
+    assert World(rear_end("brake")).post_crash is PostCrashPolicy.BRAKE
+    loop = closed_loop(rear_end("brake"), "keep_lane", config=RunConfig(post_crash="continue"))
+    assert loop.world.post_crash is PostCrashPolicy.CONTINUE
+
+
+class _CycleTimes(Metric):
+    def start(self, run):
+        self.times = []
+
+    def on_cycle(self, run, plan: Plan):
+        self.times.append(run.world.time)
+
+    def values(self, run):
+        return {"cycle_times": self.times}
+
+
+@pytest.mark.parametrize("policy", ["brake", "continue"])
+def test_the_loop_replans_after_contact_only_under_continue(policy):
+    cycles = _CycleTimes()
+    config = RunConfig()
+    summary = run_scenario(
+        rear_end(policy, duration=3.0),
+        "keep_lane",
+        config=config,
+        metrics=(*default_metrics(config), cycles),
+    )
+    assert summary.outcome == "crash" and summary.ego_collisions
+    crash = summary.collisions[0].measurement.time
+    later = [t for t in cycles.times if t > crash]
+    if policy == "brake":
+        assert later == []
+    else:
+        # On the 10 Hz grid, plus once right when the ego comes out of an impact pulse.
+        off_grid = [t for t in later if abs(t * 10 - round(t * 10)) > 1e-6]
+        assert off_grid and min(off_grid) < crash + 0.1
+        assert max(later) > 2.5
+
+
+def test_the_policy_is_validated_naming_the_field(tmp_path):
+    with pytest.raises(
+        ValueError, match=r"ego\.post_crash: unknown post-crash policy 'stop'; allowed: brake, continue"
+    ):
+        rear_end("stop")
+    with pytest.raises(ValueError, match=r"run\.post_crash: unknown post-crash policy"):
+        RunConfig(post_crash="coast")
+    path = tmp_path / "bad.toml"
+    path.write_text('name = "bad"\n[ego]\npost_crash = 1\n')
+    with pytest.raises(ValueError, match=r"bad\.toml.*ego\.post_crash"):
+        load_scenario(path)
+    assert rear_end("continue").ego.post_crash == "continue"
