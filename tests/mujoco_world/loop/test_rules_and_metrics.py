@@ -274,9 +274,10 @@ def test_harm_per_group_combines_a_bodys_impacts_adds_bodies_and_skips_walls():
     assert values["harm_third_party"] == pytest.approx({"ego": 0.0, "third_party": 0.05, "vulnerable": 0.25})
 
 
-def test_min_distance_stops_at_the_ego_contact():
+@pytest.mark.parametrize("policy", ["brake", "continue"])
+def test_min_distance_follows_the_ego_while_it_drives_on_its_plans(policy):
     types = ("car", RoadUserType.CAR, RoadUserType.PEDESTRIAN, RoadUserType.BICYCLE)
-    world = SimpleNamespace(n=4, types=types, crashed=np.zeros(4, bool))
+    world = SimpleNamespace(n=4, types=types, crashed=np.zeros(4, bool), ego_on_plan=True)
     world.scene = SimpleNamespace(names=("ego", "van", "walker", "cyclist"))
     distances = iter([np.array([4.0, 6.0, 0.9]), np.array([3.0, 2.5, 50.0]), np.array([-0.2, 0.1, 0.0])])
     world.ego_distances = lambda cap: next(distances)
@@ -286,12 +287,21 @@ def test_min_distance_stops_at_the_ego_contact():
     metric.sample(run)
     metric.sample(run)
     world.crashed[0] = True
-    metric.sample(run)  # after the ego's contact: not measured
-    assert metric.values(run) == {
-        "min_distance": 0.9,
-        "min_distance_vulnerable": 0.9,
-        "clearance_vulnerable": {"walker": 2.5, "cyclist": 0.9},  # each VRU's own closest pass
-    }
+    # After the ego's contact: braking to rest, not measured; driving on (post_crash = continue), measured.
+    world.ego_on_plan = policy == "continue"
+    metric.sample(run)
+    if policy == "brake":
+        assert metric.values(run) == {
+            "min_distance": 0.9,
+            "min_distance_vulnerable": 0.9,
+            "clearance_vulnerable": {"walker": 2.5, "cyclist": 0.9},  # each VRU's own closest pass
+        }
+    else:
+        assert metric.values(run) == {
+            "min_distance": -0.2,
+            "min_distance_vulnerable": 0.0,
+            "clearance_vulnerable": {"walker": 0.1, "cyclist": 0.0},
+        }
 
 
 def test_validity_levels_count_cycles():
