@@ -192,7 +192,7 @@ def highway_cut_in(rng: np.random.Generator | None = None) -> Scenario:
     return Scenario(
         name="highway_cut_in",
         description="highway: a car cuts in from the right with a short gap",
-        road=RoadSpec(length=500.0, lanes=3, speed_limit=30.0, boundary="wall"),
+        road=RoadSpec(length=500.0, lanes=3, lanes_forward=3, speed_limit=30.0, boundary="wall"),
         ego=EgoSpec(lane=1, s0=10.0, speed=ego_speed, goal_s=450.0),
         road_users=(cutter, ahead, left, slow_right),
         duration=25.0,
@@ -516,7 +516,7 @@ def dilemma_pedestrian_car(rng: np.random.Generator | None = None) -> Scenario:
     puller = _user(
         "car_pulling_out",
         "car",
-        RouteSpec(lane=1, offset=1.0),
+        RouteSpec(lane=1, offset=1.0, wrong_way=True),  # parked against the traffic
         ped_x + draw(1.5, 0.0, 3.0),
         _scripted(
             0.0,
@@ -614,7 +614,7 @@ def cut_in_and_brake(rng: np.random.Generator | None = None) -> Scenario:
     return Scenario(
         name="cut_in_and_brake",
         description="a car cuts in when the ego is 24 m behind, brakes to a stop at 6 m/s^2, then goes",
-        road=RoadSpec(length=400.0, lanes=2, speed_limit=25.0, boundary="wall"),
+        road=RoadSpec(length=400.0, lanes=2, lanes_forward=2, speed_limit=25.0, boundary="wall"),
         ego=EgoSpec(lane=1, s0=10.0, speed=draw(20.0, 17.0, 22.0), goal_s=370.0),
         road_users=(cutter,),
         duration=30.0,

@@ -73,6 +73,46 @@ class StaticBox:
     kind: Boundary
 
 
+#: Painted length and gap of a dashed lane line [m] (a German rural road's 3 m / 6 m).
+DASH_M = 3.0
+GAP_M = 6.0
+
+
+def dashes(points: np.ndarray, dash: float, gap: float) -> list[np.ndarray]:
+    """A polyline cut into dashes: ``dash`` painted, ``gap`` free, from its start [m].
+
+    Args:
+        points: the line [m], shape (n, 2).
+        dash, gap: [m], > 0.
+
+    Returns:
+        One polyline per dash (the last may be shorter), each shape (k, 2), k >= 2.
+    """
+    seg = np.hypot(*np.diff(points, axis=0).T)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    starts = np.arange(0.0, arc[-1], dash + gap)
+    out = []
+    for a in starts:  # one dash each; drawing only
+        b = min(a + dash, arc[-1])
+        inner = (arc > a) & (arc < b)
+        s = np.concatenate([[a], arc[inner], [b]])
+        out.append(np.column_stack([np.interp(s, arc, points[:, 0]), np.interp(s, arc, points[:, 1])]))
+    return [d for d in out if len(d) >= 2 and np.hypot(*(d[-1] - d[0])) > 1e-9]
+
+
+@dataclass(frozen=True, slots=True)
+class LaneMarkings:
+    """Painted lines of a road (``RoadGeometry.lane_markings``).
+
+    Attributes:
+        solid: solid lines (outer lane edges, the centre line) [m], each shape (k, 2).
+        dashed: the dashes of the lines between lanes of one direction [m], each shape (k, 2).
+    """
+
+    solid: tuple[np.ndarray, ...]
+    dashed: tuple[np.ndarray, ...]
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class RoadGeometry:
     """The built road.
@@ -94,10 +134,85 @@ class RoadGeometry:
     # ------------------------------------------------------------------ lanes
 
     def lane_offset(self, lane: int, direction: int) -> float:
-        """Offset d of a lane centre from the reference line [m] (left of the reference)."""
+        """Offset d of a lane centre from the reference line [m] (left of the reference).
+
+        Args:
+            lane: lane number from the right edge of the road in ``direction`` (across
+                the whole road: the lanes of the other direction have the high numbers).
+            direction: +1 along the reference direction, -1 against.
+        """
         spec = self.spec
         check(0 <= lane < spec.lanes, f"lane must lie in 0..{spec.lanes - 1}, got {lane}")
         return direction * (-spec.half_width + (lane + 0.5) * spec.lane_width)
+
+    def lanes_in(self, direction: int) -> tuple[int, ...]:
+        """The lanes that run in ``direction``, numbered from the right in that direction.
+
+        Args:
+            direction: +1 along the reference direction, -1 against.
+
+        Returns:
+            ``0 .. n - 1`` with n = ``road.lanes_forward`` (+1) or ``road.lanes_backward``
+            (-1); the other numbers of ``lane_offset(lane, direction)`` are the lanes of
+            the other direction.
+        """
+        check(direction in (1, -1), f"direction must be 1 or -1, got {direction!r}")
+        return tuple(range(self.spec.lanes_of(direction)))
+
+    def lane_runs(self, lane: int, direction: int) -> int:
+        """The direction of travel of lane ``lane`` (numbered from the right in ``direction``).
+
+        Returns:
+            ``direction`` if the lane runs that way, ``-direction`` if it belongs to the
+            other direction (an overtaker's or a wrong-way driver's lane).
+        """
+        check(0 <= lane < self.spec.lanes, f"lane must lie in 0..{self.spec.lanes - 1}, got {lane}")
+        return direction if lane in self.lanes_in(direction) else -direction
+
+    def lane_edges(self) -> np.ndarray:
+        """Offsets d of the lane boundaries from the reference line [m], right to left, shape (lanes + 1,).
+
+        The first and last are the road's outer lane edges (the shoulders lie beyond).
+        """
+        spec = self.spec
+        return -spec.half_width + spec.lane_width * np.arange(spec.lanes + 1)
+
+    @property
+    def centre_offset(self) -> float | None:
+        """Offset d of the centre line between the two directions [m]; None on a one-way road.
+
+        The lanes of direction +1 lie right of it (d below it), those of direction -1 left.
+        """
+        spec = self.spec
+        if spec.kind is RoadKind.MAP or spec.lanes_forward in (0, spec.lanes):
+            return None
+        return float(self.lane_edges()[spec.lanes_forward])
+
+    def lane_markings(self) -> LaneMarkings:
+        """The painted lines of the main road (and the cross road): solid edges and centre, dashed lanes.
+
+        The outer lane edges (between lanes and shoulder) and the centre line between
+        the two directions are solid, the lines between lanes of one direction dashed
+        (``DASH_M`` painted, ``GAP_M`` free). A map road has none (its lanes are not
+        numbered).
+        """
+        spec = self.spec
+        if spec.kind is RoadKind.MAP:
+            return LaneMarkings((), ())
+        edges = self.lane_edges()
+        centre = spec.lanes_forward
+        solid: list[np.ndarray] = []
+        dashed: list[np.ndarray] = []
+        for line in (self.main_line, self.cross_line):
+            if line is None:
+                continue
+            for i, d in enumerate(edges):
+                marking = offset_polyline(line, float(d))
+                if i in (0, spec.lanes) or (i == centre and self.centre_offset is not None):
+                    solid.append(marking)
+                else:
+                    dashed.extend(dashes(marking, DASH_M, GAP_M))
+        return LaneMarkings(tuple(solid), tuple(dashed))
 
     def _line(self, road: RoadName) -> np.ndarray:
         if road is RoadName.CROSS:
@@ -131,7 +246,9 @@ class RoadGeometry:
         heading_out = heading_in + (0.5 * math.pi if spec.turn is Turn.LEFT else -0.5 * math.pi)
         exit_road, exit_dir = _arm_of_heading(heading_out)
         d_in = self.lane_offset(spec.lane, spec.direction) + spec.direction * spec.offset
-        lane_out = min(spec.lane, self.spec.lanes - 1)
+        # The same lane of the exit's own lanes (a wrong-way driver keeps to the other side).
+        own_out = self.spec.lanes_of(exit_dir)
+        lane_out = spec.lane if spec.wrong_way else min(spec.lane, max(own_out - 1, 0))
         d_out = self.lane_offset(lane_out, exit_dir) + exit_dir * spec.offset
 
         def point(road: RoadName, u: float, d: float) -> np.ndarray:

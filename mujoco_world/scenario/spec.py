@@ -228,7 +228,15 @@ class RoadSpec:
             map (``map`` gives the geometry; ``length`` is the length of its reference
             path, the lane and curve fields are not used).
         length: centre-line length of the main road [m] (and of the cross road).
-        lanes: number of lanes of each road.
+        lanes: number of lanes of each road, both directions together.
+        lanes_forward: how many of them run along the road's reference direction
+            (main: +x, cross: +y); the others run against it. None (the default) is
+            half of them, rounded up: ``lanes = 2`` is one lane each way, ``lanes = 1``
+            one lane along the reference, ``lanes = 3`` two along and one against. A
+            one-way road has ``lanes_forward = lanes``. Lanes are numbered across the
+            whole road from the right edge of a direction of travel, so the lanes of
+            direction +1 are 0 .. lanes_forward - 1 and those of direction -1 are
+            0 .. lanes - lanes_forward - 1 (``RoadGeometry.lanes_in``).
         lane_width: [m].
         speed_limit: [m/s].
         parking_width: drivable parking strip right of the main road's reference
@@ -245,6 +253,7 @@ class RoadSpec:
     kind: RoadKind = RoadKind.STRAIGHT
     length: float = 200.0
     lanes: int = 2
+    lanes_forward: int | None = None
     lane_width: float = 3.5
     speed_limit: float = 13.9
     parking_width: float = 0.0
@@ -283,6 +292,12 @@ class RoadSpec:
             isinstance(self.lanes, int) and 1 <= self.lanes <= 8,
             f"road.lanes must be an integer in 1..8, got {self.lanes!r}",
         )
+        forward = self.lanes_forward if self.lanes_forward is not None else (self.lanes + 1) // 2
+        check(
+            isinstance(forward, int) and not isinstance(forward, bool) and 0 <= forward <= self.lanes,
+            f"road.lanes_forward must be an integer in 0..road.lanes ({self.lanes}), got {forward!r}",
+        )
+        object.__setattr__(self, "lanes_forward", forward)
         if self.kind is RoadKind.CURVED:
             check(
                 0 < abs(self.curve_angle) <= 180,
@@ -310,6 +325,15 @@ class RoadSpec:
         return 0.5 * self.lanes * self.lane_width
 
     @property
+    def lanes_backward(self) -> int:
+        """Lanes that run against the reference direction (``lanes - lanes_forward``)."""
+        return self.lanes - self.lanes_forward  # type: ignore[operator]
+
+    def lanes_of(self, direction: int) -> int:
+        """Number of lanes that run in ``direction`` (+1 along the reference, -1 against)."""
+        return self.lanes_forward if direction > 0 else self.lanes_backward  # type: ignore[return-value]
+
+    @property
     def arc_length(self) -> float:
         """Arc length of the curve of a curved road [m]."""
         return self.radius * math.radians(abs(self.curve_angle))
@@ -326,6 +350,10 @@ class RouteSpec:
         offset: lateral offset from the lane centre [m], positive left of travel.
         turn: manoeuvre at an intersection.
         waypoints: world positions [m] (``road = "waypoints"``), at least two.
+        wrong_way: a wrong-way driver: its lane runs the other way. A route in a lane
+            of the other direction is refused without it, and it is refused on a lane
+            of the route's own direction (``Scenario`` checks both against
+            ``road.lanes_forward``; pedestrians and parked road users are exempt).
     """
 
     road: RoadName = RoadName.MAIN
@@ -334,6 +362,7 @@ class RouteSpec:
     offset: float = 0.0
     turn: Turn = Turn.STRAIGHT
     waypoints: tuple[tuple[float, float], ...] = ()
+    wrong_way: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "road", parse_enum(RoadName, self.road, "road name", "route.road"))
@@ -343,6 +372,9 @@ class RouteSpec:
             f"route.lane must be an integer >= 0, got {self.lane!r}",
         )
         check(self.direction in (1, -1), f"route.direction must be 1 or -1, got {self.direction!r}")
+        check(
+            isinstance(self.wrong_way, bool), f"route.wrong_way must be true or false, got {self.wrong_way!r}"
+        )
         check_finite("route", offset=self.offset)
         check_plausible("route", self)
         try:
@@ -1349,6 +1381,14 @@ class Scenario:
             )
         lanes = self.road.lanes
         check(self.ego.lane < lanes, f"ego.lane must be < road.lanes ({lanes}), got {self.ego.lane}")
+        forward = self.road.lanes_forward
+        check(
+            self.road.kind is RoadKind.MAP or self.ego.lane < forward,
+            f"ego.lane must be a lane that runs the ego's way (along the reference direction: lanes "
+            f"0..{forward - 1} of road.lanes_forward = {forward}), got {self.ego.lane}"
+            if forward
+            else "road.lanes_forward = 0 leaves the ego (which drives along the reference direction) no lane",
+        )
         if self.road.kind is not RoadKind.INTERSECTION:
             check(
                 self.ego.turn is Turn.STRAIGHT,
@@ -1368,6 +1408,7 @@ class Scenario:
                     route.lane < lanes,
                     f"{where}.route.lane must be < road.lanes ({lanes}), got {route.lane}",
                 )
+                self._check_lane_direction(where, user)
             if self.road.kind is not RoadKind.INTERSECTION:
                 check(
                     route.road is not RoadName.CROSS,
@@ -1377,6 +1418,39 @@ class Scenario:
                     route.turn is Turn.STRAIGHT,
                     f"{where}.route.turn is only allowed on an intersection road",
                 )
+
+    def _check_lane_direction(self, where: str, user: RoadUserSpec) -> None:
+        """A driver's route lane runs its way, or the route says ``wrong_way`` and it does not.
+
+        Pedestrians and parked road users are exempt (they do not drive a lane), and so
+        are map roads (their lanes have no numbers).
+        """
+        route, road = user.route, self.road
+        if (
+            road.kind is RoadKind.MAP
+            or user.type is RoadUserType.PEDESTRIAN
+            or user.behaviour.kind is BehaviourKind.PARKED
+        ):
+            check(
+                not route.wrong_way or road.kind is not RoadKind.MAP,
+                f"{where}.route.wrong_way needs numbered lanes (not a map road)",
+            )
+            return
+        own = road.lanes_of(route.direction)
+        runs_its_way = route.lane < own
+        way = "along" if route.direction > 0 else "against"
+        lanes = f"lanes 0..{own - 1}" if own else "none"
+        check(
+            runs_its_way != route.wrong_way,
+            f"{where}.route.lane = {route.lane} with direction = {route.direction} is a lane of the other "
+            f"direction: the lanes that run {way} the reference direction are {lanes} (road.lanes = "
+            f"{road.lanes}, road.lanes_forward = {road.lanes_forward}); use one of them, set "
+            f"road.lanes_forward, or say route.wrong_way = true for a wrong-way driver"
+            if not route.wrong_way
+            else f"{where}.route.wrong_way = true, but lane {route.lane} with direction = {route.direction} "
+            f"runs its way ({lanes} run {way} the reference direction); remove wrong_way or pick a lane "
+            f"of the other direction",
+        )
 
     def _check_debris(self) -> None:
         """Debris names are unique and every piece lies on the road."""

@@ -12,7 +12,9 @@ leaves a readable ``recording.partial.rrd`` that lacks at most that interval.
 Entities (all in the world frame, z up, road plane z = 0):
 
 * ``world/road/{surface,boundary,lanes,walls}`` (static): drivable area, its outline,
-  lane markings, wall or kerb boxes.
+  lane markings (``RoadGeometry.lane_markings``: solid outer lane edges and centre line
+  between the directions, dashed lines between lanes of one direction), wall or kerb
+  boxes.
 * ``world/ego`` and ``world/road_users/{boxes,round}`` every logged frame: boxes
   (Boxes3D with yaw quaternions) and pedestrians as cylinders, coloured by type,
   labelled ``type #id``; ``world/ego_path``: the executed ego path.
@@ -98,7 +100,6 @@ from mujoco_world.loop.metrics import DISTANCE_CAP, ego_time_to_collision, footp
 from mujoco_world.loop.observers import RunObserver
 from mujoco_world.loop.summary import RunSummary
 from mujoco_world.loop.world import World
-from mujoco_world.scenario.road import offset_polyline
 from mujoco_world.scenario.spec import Scenario
 
 if TYPE_CHECKING:
@@ -574,14 +575,14 @@ class RerunRecorder(RunObserver):
             rr.LineStrips3D([_to3(r) for r in rings], colors=[(240, 240, 240)], radii=0.08),
             static=True,
         )
-        spec = road.spec
-        lanes = []
-        for line in (road.main_line, road.cross_line):
-            if line is None:
-                continue
-            for i in range(spec.lanes + 1):
-                lanes.append(_to3(offset_polyline(line, -spec.half_width + i * spec.lane_width)))
-        rec.log("world/road/lanes", rr.LineStrips3D(lanes, colors=[(250, 250, 200)], radii=0.05), static=True)
+        markings = road.lane_markings()
+        lines = [*markings.solid, *markings.dashed]
+        if lines:
+            rec.log(
+                "world/road/lanes",
+                rr.LineStrips3D([_to3(line) for line in lines], colors=[(250, 250, 200)], radii=0.06),
+                static=True,
+            )
         boxes = road.static_boxes()
         if boxes:
             rec.log(

@@ -15,7 +15,7 @@ speed = 10.0
 name = "east"
 type = "car"
 s0 = 100.0
-route = {{ lane = 1 }}
+route = {{ lane = 1, wrong_way = true }}
 behaviour = {{ kind = "scripted", speed = 10.0 }}
 [[road_users]]
 name = "west"

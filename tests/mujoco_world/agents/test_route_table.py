@@ -32,9 +32,8 @@ def test_a_crowded_scenario_builds_one_route_per_lane():
          "behaviour": {"kind": "scripted", "speed": 10.0}}
         for i in range(400)
     ]  # fmt: skip
-    scenario = scenario_from_dict(
-        {"name": "crowd", "duration": 1.0, "road": {"length": 600.0, "lanes": 8}, "road_users": users}
-    )
+    road = {"length": 600.0, "lanes": 8, "lanes_forward": 8}
+    scenario = scenario_from_dict({"name": "crowd", "duration": 1.0, "road": road, "road_users": users})
     world = World(scenario)
     routes = world.fleet.routes
     assert routes.x.shape[0] == 8

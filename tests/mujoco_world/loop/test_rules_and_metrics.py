@@ -52,7 +52,7 @@ def head_on_beside_the_ego(duration=6.0):
             "ego": {"s0": 10.0, "speed": 10.0, "goal_s": 60.0},
             "duration": duration,
             "road_users": [
-                {"name": "east", "s0": 100.0, "route": {"lane": 1}, **car},
+                {"name": "east", "s0": 100.0, "route": {"lane": 1, "wrong_way": True}, **car},
                 {"name": "west", "s0": 160.0, "route": {"lane": 0, "direction": -1}, **car},
             ],
         }

@@ -27,7 +27,7 @@ def third_party_crash(duration=6.0):
                     "name": "east",
                     "type": "car",
                     "s0": 100.0,
-                    "route": {"lane": 1},
+                    "route": {"lane": 1, "wrong_way": True},
                     "behaviour": {"kind": "scripted", "speed": 10.0},
                 },
                 {

@@ -118,7 +118,7 @@ def _world(**sensor):
                         "name": "beside",
                         "type": "car",
                         "s0": 0.0,
-                        "route": {"lane": 1},
+                        "route": {"lane": 1, "wrong_way": True},
                         "behaviour": {"speed": 0.0},
                     },
                 ],

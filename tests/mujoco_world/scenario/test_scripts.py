@@ -25,7 +25,7 @@ def _world(events, other_speed=8.0):
                     "name": "b",
                     "type": "car",
                     "s0": 10.0,
-                    "route": {"lane": 1},
+                    "route": {"lane": 1, "wrong_way": True},
                     "behaviour": {"kind": "scripted", "speed": other_speed},
                 },
             ],
@@ -107,7 +107,7 @@ def test_distance_and_time_to_collision_conditions():
                     "name": "a",
                     "type": "car",
                     "s0": 250.0,
-                    "route": {"lane": 1, "direction": -1},  # the ego's lane, towards it
+                    "route": {"lane": 1, "direction": -1, "wrong_way": True},  # the ego's lane, towards it
                     "behaviour": {
                         "kind": "scripted",
                         "speed": 10.0,

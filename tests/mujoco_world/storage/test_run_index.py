@@ -211,7 +211,7 @@ def test_index_row_of_a_real_run_counts_third_party_collisions_apart(tmp_path):
             "ego": {"s0": 10.0, "speed": 10.0, "goal_s": 60.0},
             "duration": 6.0,
             "road_users": [
-                {"name": "east", "s0": 100.0, "route": {"lane": 1}, **car},
+                {"name": "east", "s0": 100.0, "route": {"lane": 1, "wrong_way": True}, **car},
                 {"name": "west", "s0": 160.0, "route": {"lane": 0, "direction": -1}, **car},
             ],
         }

@@ -36,7 +36,7 @@ def crash_summary():
             "ego": {"s0": 10.0, "speed": 10.0},
             "duration": 3.0,
             "road_users": [
-                {"name": "east", "s0": 100.0, "route": {"lane": 1}, **car},
+                {"name": "east", "s0": 100.0, "route": {"lane": 1, "wrong_way": True}, **car},
                 {"name": "west", "s0": 160.0, "route": {"lane": 0, "direction": -1}, **car},
             ],
         }
