@@ -11,7 +11,9 @@ from mujoco_world.scenario.spec import scenario_from_dict
 
 
 def _parked(name, s, lane):
-    return {"name": name, "type": "car", "s0": s, "route": {"lane": lane}, "behaviour": {"kind": "scripted"}}
+    """A car standing in ``lane`` facing +x (in lane 1, the other direction's lane: wrong way)."""
+    route = {"lane": lane, "wrong_way": lane == 1}
+    return {"name": name, "type": "car", "s0": s, "route": route, "behaviour": {"kind": "scripted"}}
 
 
 def _standing(users=(), stop_lines=(), duration=6.0, speed=0.0):
