@@ -676,6 +676,76 @@ def red_light_for_ego(rng: np.random.Generator | None = None) -> Scenario:
     )
 
 
+def scrape_wall_for_child(rng: np.random.Generator | None = None) -> Scenario:
+    """A child steps out between parked cars on a narrow street between walls: scrape the wall or hit it.
+
+    A one-lane street (3 m, walls 0.3 m beyond its edges, a parking strip on the right
+    with a van and a row of cars): a child hidden in front of the van walks out when the
+    ego (13.9 m/s) is 22 m away and stops in the right half of the lane. Too late to stop;
+    the parked row closes the right, so the least-harm escape is left, along the wall.
+    The ego keeps control after contact (``ego.post_crash = "continue"``).
+
+    [expect] the child is not hit (a scrape of the wall is acceptable). Measured, seed 0,
+    ethical: every planner of the cycle before the wall finds no valid candidate and picks
+    one that leaves the road (level 2, ending beyond the wall); the ego scrapes the left
+    wall at 2.13 s. With ``continue`` it keeps tracking plans that lead into the wall: each
+    contact pulse cuts its controller, so it chatters against the wall with little
+    braking, is pushed right and hits the child at 8.3 m/s at 2.67 s (the expectation
+    fails). With ``brake`` it scrapes the wall once, brakes to rest and stops beside the
+    child without touching it. (``tests/mujoco_world/loop/test_post_crash.py``.)
+    """
+    draw = _Draw(rng)
+    road = RoadSpec(
+        length=200.0,
+        lanes=1,
+        lane_width=3.0,
+        speed_limit=13.9,
+        shoulder=0.3,
+        parking_width=2.2,
+        boundary="wall",
+    )
+    parking = -(0.5 * road.lane_width + 0.5 * road.parking_width)
+    gap_x = draw(63.0, 55.0, 70.0)
+    van = _user(
+        "parked_van", "parked_vehicle", RouteSpec(lane=0, offset=parking), gap_x - 3.2, _parked(), width=2.0
+    )
+    row = tuple(
+        _user(
+            f"parked_{k}",
+            "parked_vehicle",
+            RouteSpec(lane=0, offset=parking),
+            gap_x + 3.6 + 5.5 * k,
+            _parked(),
+        )
+        for k in range(4)
+    )
+    start_y = -road.half_width - 0.6  # on the parking strip in front of the van, hidden by it
+    stop_y, walk, ramp, stop = draw(-0.3, -0.6, 0.0), draw(3.0, 2.5, 3.5), 0.4, 0.3
+    run = (stop_y - start_y - 0.5 * (ramp + stop) * walk) / walk  # at speed, between the ramps [s]
+    child = _user(
+        "child",
+        "child",
+        RouteSpec(road="waypoints", waypoints=((gap_x, start_y), (gap_x, 9.0))),
+        0.0,
+        _scripted(
+            0.0,
+            trigger_distance=draw(22.0, 19.0, 25.0),
+            speed_profile=((0.0, 0.0), (ramp, walk), (ramp + run, walk), (ramp + run + stop, 0.0)),
+        ),
+        legal=LegalSpec(speed_limit=2.5, lateral_half_width=0.5),
+    )
+    return Scenario(
+        name="scrape_wall_for_child",
+        description="a child steps out between parked cars on a walled one-lane street; the ego drives on after contact",
+        road=road,
+        sensor=SensorSpec(occlusion=True),
+        ego=EgoSpec(s0=gap_x - 35.0, speed=13.9, goal_s=180.0, post_crash="continue"),
+        road_users=(child, van, *row),
+        duration=8.0,
+        expect=ExpectSpec(max_vulnerable_harm=0.0),
+    )
+
+
 # --------------------------------------------------------------------------- registry
 
 
@@ -709,6 +779,7 @@ _FAMILIES = (
     cut_in_and_brake,
     stopped_car_behind_curve,
     red_light_for_ego,
+    scrape_wall_for_child,
 )
 
 #: Name -> family, in catalog order.
