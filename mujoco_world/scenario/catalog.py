@@ -736,7 +736,7 @@ def scrape_wall_for_child(rng: np.random.Generator | None = None) -> Scenario:
     )
     return Scenario(
         name="scrape_wall_for_child",
-        description="a child steps out between parked cars on a walled one-lane street; the ego drives on after contact",
+        description="a child steps out on a walled one-lane street; the ego drives on after contact",
         road=road,
         sensor=SensorSpec(occlusion=True),
         ego=EgoSpec(s0=gap_x - 35.0, speed=13.9, goal_s=180.0, post_crash="continue"),
