@@ -4,6 +4,7 @@ Inside an impact pulse no controller force acts; outside pulses a crashed ego ke
 tracking its plans under ``continue`` and brakes to rest under ``brake``.
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,6 +16,7 @@ from mujoco_world.loop.metrics import Metric, default_metrics
 from mujoco_world.loop.runner import closed_loop, run_scenario
 from mujoco_world.loop.world import World
 from mujoco_world.physics.control import GRAVITY, TrajectoryReference, tracking_forces
+from mujoco_world.scenario.catalog import get_scenario
 from mujoco_world.scenario.spec import PostCrashPolicy, load_scenario, scenario_from_dict
 
 SPEED = 15.0  # [m/s]
@@ -207,3 +209,45 @@ def test_the_policy_is_validated_naming_the_field(tmp_path):
     with pytest.raises(ValueError, match=r"bad\.toml.*ego\.post_crash"):
         load_scenario(path)
     assert rear_end("continue").ego.post_crash == "continue"
+
+
+@pytest.fixture(scope="module")
+def scrape_runs():
+    """``scrape_wall_for_child``, ethical planner, both policies, 3 s (the contacts come by 2.7 s)."""
+    scenario = dataclasses.replace(get_scenario("scrape_wall_for_child"), duration=3.0)
+    assert scenario.ego.post_crash is PostCrashPolicy.CONTINUE
+    return {
+        policy: run_scenario(scenario, "ethical", config=RunConfig(post_crash=policy))
+        for policy in ("brake", "continue")
+    }
+
+
+def _contacts(summary):
+    return [(c.measurement.a.name, c.measurement.b.name, c.measurement.time) for c in summary.collisions]
+
+
+def test_scrape_wall_for_child_the_ego_scrapes_the_wall_first(scrape_runs):
+    # With no valid candidate left, the planner leaves the road (level 2) rather than
+    # hit the child (level 1): under both policies the first contact is the left wall.
+    for summary in scrape_runs.values():
+        first = min(summary.collisions, key=lambda c: c.measurement.time)
+        assert (first.measurement.a.name, first.measurement.b.type) == ("ego", "wall")
+        assert first.measurement.time == pytest.approx(2.13, abs=0.05)
+    # brake: one scrape, then it brakes to rest beside the child without touching it.
+    brake = scrape_runs["brake"]
+    assert [(a, b) for a, b, _ in _contacts(brake)] == [("ego", "static")]
+    assert brake.harm["vulnerable"] == 0.0 and brake.verdict == "pass"
+
+
+def test_scrape_wall_for_child_continue_hits_the_child_after_the_scrape(scrape_runs):
+    # What the ethical planner does today under continue (README, "Control after
+    # contact"): it keeps planning through the wall, its controller is cut in each
+    # contact pulse, it is pushed off the wall and hits the child at ~8 m/s. Each contact
+    # is its own measured collision, and the loop replanned after the first.
+    run = scrape_runs["continue"]
+    assert sorted((a, b) for a, b, _ in _contacts(run)) == [("ego", "child"), ("ego", "static")]
+    child = next(c for c in run.collisions if c.measurement.b.name == "child")
+    assert child.measurement.time > 2.5
+    assert run.cycles > scrape_runs["brake"].cycles + 10
+    assert run.harm["vulnerable"] == pytest.approx(child.b.harm_measured)
+    assert run.verdict == "fail"  # [expect] max_vulnerable_harm = 0: the expectation this planner fails
