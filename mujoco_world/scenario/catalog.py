@@ -692,7 +692,12 @@ def scrape_wall_for_child(rng: np.random.Generator | None = None) -> Scenario:
     contact pulse cuts its controller, so it chatters against the wall with little
     braking, is pushed right and hits the child at 8.3 m/s at 2.67 s (the expectation
     fails). With ``brake`` it scrapes the wall once, brakes to rest and stops beside the
-    child without touching it. (``tests/mujoco_world/loop/test_post_crash.py``.)
+    child without touching it. selfish and standard pick candidates of the same level 2
+    that thread between the child and the wall (0.22 m and 0.12 m from the child) and
+    reach the goal without a contact: ethical's lowest risk cost (Eq. 6) picks the plan
+    farthest from the child, through the wall, whose harm the planner takes at the speed
+    of the first step off the road however deep the plan goes (``risk.boundary_risk``).
+    (``tests/mujoco_world/loop/test_post_crash.py``.)
     """
     draw = _Draw(rng)
     road = RoadSpec(
@@ -739,9 +744,9 @@ def scrape_wall_for_child(rng: np.random.Generator | None = None) -> Scenario:
         description="a child steps out on a walled one-lane street; the ego drives on after contact",
         road=road,
         sensor=SensorSpec(occlusion=True),
-        ego=EgoSpec(s0=gap_x - 35.0, speed=13.9, goal_s=180.0, post_crash="continue"),
+        ego=EgoSpec(s0=gap_x - 35.0, speed=13.9, goal_s=gap_x + 45.0, post_crash="continue"),
         road_users=(child, van, *row),
-        duration=8.0,
+        duration=10.0,
         expect=ExpectSpec(max_vulnerable_harm=0.0),
     )
 
