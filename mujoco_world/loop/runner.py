@@ -387,6 +387,7 @@ class ClosedLoop:
             values=values,
             timings=timings,
             notes=(*run.scenario.notes, *world.notes),
+            post_crash=world.post_crash.value,
         )
         return replace(summary, expectations=check_expectations(run.scenario.expect, summary))
 

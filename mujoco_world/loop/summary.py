@@ -123,7 +123,8 @@ class RunSummary:
         min_distance: smallest ego-to-road-user distance [m] (negative: overlap).
         min_distance_vulnerable: the same to vulnerable road users [m].
         clearance_vulnerable: smallest ego distance to each vulnerable road user by
-            name [m], until the ego's first contact (capped at 50 m).
+            name [m], while the ego drives on its plans (until its first contact under
+            the ``brake`` post-crash policy, the whole run under ``continue``; capped at 50 m).
         min_ttc: smallest constant-velocity time-to-collision of the ego [s] (inf:
             no approach within the horizon).
         max_collision_probability: highest collision probability of any road user
@@ -143,6 +144,8 @@ class RunSummary:
             friction...).
         expectations: the scenario's ``[expect]`` items checked against this run
             (empty if it expects nothing).
+        post_crash: what the ego did after its first contact in this run (the
+            scenario's ``ego.post_crash`` or ``RunConfig.post_crash``): "brake" or "continue".
     """
 
     scenario: str
@@ -178,6 +181,7 @@ class RunSummary:
     extra_metrics: dict[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     expectations: tuple[ExpectationResult, ...] = ()
+    post_crash: str = "brake"
 
     @property
     def verdict(self) -> str:
@@ -222,6 +226,7 @@ class RunSummary:
 _LOOP_FIELDS = frozenset(
     {"scenario", "planner", "seed", "outcome", "reason", "duration", "steps", "cycles"}
     | {"bodies", "collisions", "ego_collided", "timings", "extra_metrics", "notes", "expectations"}
+    | {"post_crash"}
 )
 
 
@@ -240,6 +245,7 @@ def build_summary(
     values: Mapping[str, Any],
     timings: Mapping[str, float],
     notes: Sequence[str] = (),
+    post_crash: str = "brake",
 ) -> RunSummary:
     """The summary of a finished run from what the loop counted and what its metrics measured.
 
@@ -248,7 +254,7 @@ def build_summary(
             collisions, timings: as in ``RunSummary``.
         values: the metrics' values by name: a ``RunSummary`` field sets it, any
             other name goes to ``extra_metrics``.
-        notes: as in ``RunSummary``.
+        notes, post_crash: as in ``RunSummary``.
 
     Raises:
         ValueError: a metric value names a field the loop fills itself.
@@ -271,6 +277,7 @@ def build_summary(
         ego_collided=any(c.involves_ego for c in collisions),
         timings=dict(timings),
         notes=tuple(notes),
+        post_crash=str(post_crash),
         extra_metrics={k: v for k, v in values.items() if k not in known},
         **{k: v for k, v in values.items() if k in known},
     )

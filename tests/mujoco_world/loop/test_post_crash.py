@@ -186,6 +186,7 @@ def test_the_loop_replans_after_contact_only_under_continue(policy):
         metrics=(*default_metrics(config), cycles),
     )
     assert summary.outcome == "crash" and summary.ego_collisions
+    assert summary.post_crash == policy  # the summary says which policy applied
     crash = summary.collisions[0].measurement.time
     later = [t for t in cycles.times if t > crash]
     if policy == "brake":
