@@ -2,8 +2,9 @@
 
 The delta-v error of a model is e = (measured - model) / model, measured = |J| / m over the
 impact sequence; both bodies of an impact share it (one impulse), so it is taken from body
-a. Two models are compared everywhere: paper Eq. 1 and the planar impulse model
-(``ethical_planner.impulse``). Per partner type and impact class (central collinear,
+a. Three models are compared everywhere: paper Eq. 1, the planar impulse model
+(``ethical_planner.impulse``, the first impulse) and the sequence-aware planar model (every
+impulse of the sequence, ``harm_calibration.sequence``). Per partner type and impact class (central collinear,
 oblique, offset): median and 95th percentile of |e|, the share of multi-impact sequences,
 agreement of the geometric impact area with the measured one and the harm error
 |H(measured) - H(model)| per body. Sweeps add the held-back evaluation by geometry cell
@@ -39,7 +40,11 @@ from harm_calibration.rows import Row, column
 AREAS = ("front", "driver_side", "right_side", "rear")
 MEASURED_STATUS = ("ok", "incomplete")
 #: Delta-v models compared: label -> (delta-v column prefix, harm column prefix).
-DV_MODELS = {"Eq. 1": ("dv_predicted", "harm_predicted"), "planar": ("dv_planar", "harm_planar")}
+DV_MODELS = {
+    "Eq. 1": ("dv_predicted", "harm_predicted"),
+    "planar": ("dv_planar", "harm_planar"),
+    "planar sequence": ("dv_planar_seq", "harm_planar_seq"),
+}
 
 
 def measured(rows: Sequence[Row]) -> list[Row]:
@@ -179,6 +184,7 @@ def summarize(rows: Sequence[Row], seeds: Sequence[int] | None = None) -> dict[s
             evaluation = held_back_evaluation(swept, seeds, reference=reference)
             summary[key] = evaluation
             summary[f"{key}_checks"] = done_checks(evaluation)
+            summary[f"{key}_seq_checks"] = done_checks(evaluation, "planar_seq")
     if swept:
         summary["speed_independence"] = speed_independence(swept)
     return summary
@@ -191,19 +197,19 @@ def _fmt(x: Any, pct: bool = False) -> str:
 
 
 def headline_markdown(summary: dict[str, Any], key: str = "by_partner") -> str:
-    """Markdown table: per partner and class, |dv error| of both models, multi-impact share."""
+    """Markdown table: per partner and class, |dv error| of every model, multi-impact share."""
     lines = [
-        "| partner | class | n | Eq. 1 median | Eq. 1 p95 | planar median | planar p95 | multi-impact |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| partner | class | n | Eq. 1 median | Eq. 1 p95 | planar median | planar p95 "
+        "| planar sequence median | planar sequence p95 | multi-impact |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for partner, entry in summary[key].items():
         for cls, s in entry.items():
-            e, p = s["Eq. 1"], s["planar"]
+            cells = " | ".join(
+                f"{_fmt(s[m]['median_abs'], True)} | {_fmt(s[m]['p95_abs'], True)}" for m in DV_MODELS
+            )
             lines.append(
-                f"| {partner} | {cls} | {s['n']} | {_fmt(e['median_abs'], True)} "
-                f"| {_fmt(e['p95_abs'], True)} "
-                f"| {_fmt(p['median_abs'], True)} | {_fmt(p['p95_abs'], True)} "
-                f"| {_fmt(s['multi_impact_share'], True)} |"
+                f"| {partner} | {cls} | {s['n']} | {cells} | {_fmt(s['multi_impact_share'], True)} |"
             )
     return "\n".join(lines)
 
@@ -229,16 +235,15 @@ def held_back_markdown(evaluation: dict[str, Any]) -> str:
         "no factor; their test impacts are counted below, not scored).",
         "",
         "| group | n test (range) | Eq. 1 median | Eq. 1 p95 | planar median | planar p95 "
-        "| correction median | correction p95 |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| planar sequence median | planar sequence p95 | correction median | correction p95 |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for group, models in evaluation["groups"].items():
-        lines.append(
-            f"| {group} | {_range(models['eq1']['n'], pct=False)} | {_range(models['eq1']['median_abs'])} "
-            f"| {_range(models['eq1']['p95_abs'])} "
-            f"| {_range(models['planar']['median_abs'])} | {_range(models['planar']['p95_abs'])} "
-            f"| {_range(models['correction']['median_abs'])} | {_range(models['correction']['p95_abs'])} |"
+        cells = " | ".join(
+            f"{_range(models[m]['median_abs'])} | {_range(models[m]['p95_abs'])}"
+            for m in ("eq1", "planar", "planar_seq", "correction")
         )
+        lines.append(f"| {group} | {_range(models['eq1']['n'], pct=False)} | {cells} |")
     unseen = evaluation["unseen"]
     counts = [u["unseen_impacts"] for u in unseen]
     tests = [u["test_impacts"] for u in unseen]
@@ -260,10 +265,10 @@ def held_back_markdown(evaluation: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def done_markdown(checks: Sequence[dict[str, Any]]) -> str:
-    """Markdown of the acceptance checks (planar median <= Eq. 1 / 2, p95 no worse)."""
+def done_markdown(checks: Sequence[dict[str, Any]], label: str = "planar") -> str:
+    """Markdown of the acceptance checks (the model's median <= Eq. 1 / 2, p95 no worse)."""
     lines = [
-        "| group | Eq. 1 median | planar median | median halved | Eq. 1 p95 | planar p95 | p95 no worse |",
+        f"| group | Eq. 1 median | {label} median | median halved | Eq. 1 p95 | {label} p95 | p95 no worse |",
         "| --- | ---: | ---: | :---: | ---: | ---: | :---: |",
     ]
     for c in checks:
@@ -278,16 +283,16 @@ def done_markdown(checks: Sequence[dict[str, Any]]) -> str:
 def harm_markdown(harm: dict[str, Any]) -> str:
     """Markdown of the harm error per partner and body."""
     lines = [
-        "| partner | body | n | Eq. 1 mean abs | Eq. 1 p95 abs | planar mean abs | planar p95 abs |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: |",
+        "| partner | body | n | Eq. 1 mean abs | Eq. 1 p95 abs | planar mean abs | planar p95 abs "
+        "| planar sequence mean abs | planar sequence p95 abs |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for partner, bodies in harm.items():
         for body, models in bodies.items():
-            e, p = models["Eq. 1"], models["planar"]
-            lines.append(
-                f"| {partner} | {body} | {e['n']} | {_fmt(e['mean_abs'])} | {_fmt(e['p95_abs'])} | "
-                f"{_fmt(p['mean_abs'])} | {_fmt(p['p95_abs'])} |"
+            cells = " | ".join(
+                f"{_fmt(models[m]['mean_abs'])} | {_fmt(models[m]['p95_abs'])}" for m in DV_MODELS
             )
+            lines.append(f"| {partner} | {body} | {models['Eq. 1']['n']} | {cells} |")
     return "\n".join(lines)
 
 
@@ -320,8 +325,8 @@ def speed_markdown(check: dict[str, Any], only_flagged: bool = False) -> str:
         "",
         "| cell | restitution | " + " | ".join(f"{v} m/s" for v in speeds)
         + " | spread | spread, single impulses | spread of measured / planar "
-        "| spread of first impulse / planar | impulses | verdict |",
-        "| --- | --- |" + " ---: |" * (len(speeds) + 4) + " --- | --- |",
+        "| spread of first impulse / planar | spread of measured / planar sequence | impulses | verdict |",
+        "| --- | --- |" + " ---: |" * (len(speeds) + 5) + " --- | --- |",
     ]  # fmt: skip
     for c in cells:
         ratios = " | ".join(_fmt(c["ratio"].get(v)) for v in speeds)
@@ -332,7 +337,8 @@ def speed_markdown(check: dict[str, Any], only_flagged: bool = False) -> str:
         lines.append(
             f"| {c['cell']} | {c['restitution_set']} | {ratios} | {_fmt(c['variation'], True)} "
             f"| {_fmt(c['variation_single'], True)} | {_fmt(c['variation_planar'], True)} "
-            f"| {_fmt(c['variation_first'], True)} | {impulses} | {c['verdict']} |"
+            f"| {_fmt(c['variation_first'], True)} | {_fmt(c.get('variation_seq'), True)} | {impulses} "
+            f"| {c['verdict']} |"
         )
     return "\n".join(lines)
 
@@ -341,8 +347,9 @@ def collisions_markdown(rows: Sequence[Row]) -> str:
     """One line per collision of a batch: measured delta-v and harm against both models."""
     lines = [
         "| run | bodies | closing [m/s] | class | dv measured a / b | Eq. 1 a / b | planar a / b "
-        "| harm measured a / b | harm Eq. 1 a / b | harm planar a / b | impulses |",
-        "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| planar sequence a / b | harm measured a / b | harm Eq. 1 a / b | harm planar a / b "
+        "| harm planar sequence a / b | impulses |",
+        "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
 
     def pair(r: Row, key: str, digits: int = 2) -> str:
@@ -353,7 +360,8 @@ def collisions_markdown(rows: Sequence[Row]) -> str:
         lines.append(
             f"| {r['source']} | {r['type_a']}-{r['type_b']} | {r['closing_speed']:.1f} | {r['class']} | "
             f"{pair(r, 'dv_measured')} | {pair(r, 'dv_predicted')} | {pair(r, 'dv_planar')} | "
-            f"{pair(r, 'harm_measured', 3)} | {pair(r, 'harm_predicted', 3)} | {pair(r, 'harm_planar', 3)} | "
+            f"{pair(r, 'dv_planar_seq')} | {pair(r, 'harm_measured', 3)} | {pair(r, 'harm_predicted', 3)} | "
+            f"{pair(r, 'harm_planar', 3)} | {pair(r, 'harm_planar_seq', 3)} | "
             f"{r['n_impulses']:.0f} |"
         )
     return "\n".join(lines)
@@ -379,9 +387,12 @@ def write_report(
         "",
         "Delta-v error e = (measured - model) / model, measured = |J| / m over the impact sequence "
         "(from the first contact until the bodies have stayed apart for 0.5 s) or of its first impulse; "
-        "models: paper Eq. 1 (perfectly plastic, common velocity) and the planar impulse model "
+        "models: paper Eq. 1 (perfectly plastic, common velocity), the planar impulse model "
         "(`ethical_planner.impulse`: impulse at the first contact of the footprints, restitution law, "
-        f"Coulomb impulse ratio 0.3). Touches (larger measured delta-v below {MIN_IMPACT_DV_MS} m/s) are "
+        "Coulomb impulse ratio 0.3) and the planar sequence model (`planar_impulse_sequence`: that impulse, "
+        "then the bodies moved on with their new velocities and yaw rates, skidding at the tyre limit as the "
+        "world's crashed bodies do, every later contact's impulse; |sum of the impulses| / m). "
+        f"Touches (larger measured delta-v below {MIN_IMPACT_DV_MS} m/s) are "
         "not scored. Harm error: |H(measured dv, measured angle) - H(model dv, geometric angle)| with the "
         "planner's harm models.",
         "",
@@ -391,6 +402,9 @@ def write_report(
         f"p95 {_fmt(o['planar']['p95_abs'], True)}. Against the first impulse: Eq. 1 median "
         f"{_fmt(f['Eq. 1']['median_abs'], True)}, p95 {_fmt(f['Eq. 1']['p95_abs'], True)}; planar median "
         f"{_fmt(f['planar']['median_abs'], True)}, p95 {_fmt(f['planar']['p95_abs'], True)}. "
+        "Planar sequence model against the whole sequence: median "
+        f"{_fmt(o['planar sequence']['median_abs'], True)}, "
+        f"p95 {_fmt(o['planar sequence']['p95_abs'], True)}. "
         f"Multi-impact sequences: {_fmt(o['multi_impact_share'], True)}. "
         f"Impact-area agreement: {_fmt(o['area_agreement'], True)}.",
         "",
@@ -413,6 +427,10 @@ def write_report(
                 "Acceptance (held back): planar median at most half of Eq. 1's, planar p95 no worse:",
                 "",
                 done_markdown(summary[f"{key}_checks"]),
+                "",
+                "The same for the planar sequence model:",
+                "",
+                done_markdown(summary[f"{key}_seq_checks"], "planar sequence"),
                 "",
             ]
     parts += ["## Harm error per partner", "", harm_markdown(summary["harm_by_partner"]), ""]

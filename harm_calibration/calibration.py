@@ -1,8 +1,10 @@
 """Held-back evaluation of the delta-v models by geometry cell, and the speed check.
 
-Three predictions of the measured delta-v are compared on impacts a model has not
-seen: paper Eq. 1, the planar impulse model (``ethical_planner.impulse``; nothing is
-fitted) and a *correction* of Eq. 1 fitted to the other impacts, a factor per bin of
+Four predictions of the measured delta-v are compared on impacts a model has not
+seen: paper Eq. 1, the planar impulse model (``ethical_planner.impulse``; the first
+impulse; nothing is fitted), the sequence-aware planar model (``planar_seq``: every
+impulse of the sequence, ``harm_calibration.sequence``; nothing is fitted) and a
+*correction* of Eq. 1 fitted to the other impacts, a factor per bin of
 (angle between the velocity directions, impact offset fraction), the median of
 measured / Eq. 1 over the bin's training impacts (the approach of the former
 former ``ethical_planner.dv_correction``, retired because the planar model beats it).
@@ -45,9 +47,16 @@ MIN_BIN_COUNT = 3
 ANGLE_EDGES_DEG = (0.0, 7.5, 22.5, 37.5, 52.5, 67.5, 82.5, 97.5, 112.5, 127.5, 142.5, 157.5, 172.5, 180.0)
 OFFSET_EDGES = (0.0, 0.125, 0.375, 0.625, 0.875, 1.0)
 #: Models compared: name -> column of the predicted delta-v of body a.
-MODELS = {"eq1": "dv_predicted_a", "planar": "dv_planar_a", "correction": ""}
+MODELS = {"eq1": "dv_predicted_a", "planar": "dv_planar_a", "planar_seq": "dv_planar_seq_a", "correction": ""}
+#: Models held against Eq. 1 by the acceptance checks (``done_checks``).
+CHECKED_MODELS = ("planar", "planar_seq")
 #: Variation of measured / Eq. 1 across closing speeds that flags a cell.
 SPEED_VARIATION_LIMIT = 0.10
+
+
+def _optional(rows: Sequence[Row], key: str) -> np.ndarray:
+    """A numeric column that older tables lack (``rows.OPTIONAL_COLUMNS``): nan where absent."""
+    return np.array([float(r.get(key, math.nan)) for r in rows], dtype=float)
 
 
 def error_stats(relative_error: np.ndarray) -> dict[str, float]:
@@ -198,6 +207,7 @@ def held_back_evaluation(
     measured = column(rows, REFERENCES[reference])
     eq1 = column(rows, "dv_predicted_a")
     planar = column(rows, "dv_planar_a")
+    planar_seq = _optional(rows, "dv_planar_seq_a")
     bins = bin_index(column(rows, "angle_deg"), column(rows, "offset"))
     groups = _groups(rows)
     per_split: dict[str, dict[str, dict[str, list[float]]]] = {
@@ -223,6 +233,7 @@ def held_back_evaluation(
         errors = {
             "eq1": relative_error(measured, eq1),
             "planar": relative_error(measured, planar),
+            "planar_seq": relative_error(measured, planar_seq),
             "correction": relative_error(measured, corrected),
         }
         for g, mask in groups.items():
@@ -263,11 +274,18 @@ def held_back_evaluation(
     }
 
 
-def done_checks(evaluation: dict[str, Any]) -> list[dict[str, Any]]:
-    """Per group: planar median <= half of Eq. 1's and planar p95 <= Eq. 1's (held back)."""
+def done_checks(evaluation: dict[str, Any], model: str = "planar") -> list[dict[str, Any]]:
+    """Per group: ``model``'s median <= half of Eq. 1's and its p95 <= Eq. 1's (held back).
+
+    Args:
+        evaluation: ``held_back_evaluation`` result.
+        model: one of ``CHECKED_MODELS`` (the keys keep the name ``planar_*`` for either).
+    """
+    if model not in CHECKED_MODELS:
+        raise ValueError(f"model must be one of {list(CHECKED_MODELS)}, got {model!r}")
     out = []
     for group, models in evaluation["groups"].items():
-        eq1, planar = models["eq1"], models["planar"]
+        eq1, planar = models["eq1"], models[model]
         m_eq1, m_pl = eq1["median_abs"]["median"], planar["median_abs"]["median"]
         p_eq1, p_pl = eq1["p95_abs"]["median"], planar["p95_abs"]["median"]
         if not all(math.isfinite(x) for x in (m_eq1, m_pl, p_eq1, p_pl)):
@@ -275,6 +293,7 @@ def done_checks(evaluation: dict[str, Any]) -> list[dict[str, Any]]:
         out.append(
             {
                 "group": group,
+                "model": model,
                 "eq1_median": m_eq1,
                 "planar_median": m_pl,
                 "eq1_p95": p_eq1,
@@ -294,6 +313,8 @@ SPEED_VERDICTS = {
     "multi-impact": "it varies, but not over the closing speeds whose sequence is a single impulse",
     "restitution law": "it varies, but measured / planar model (which takes the same e(v)) does not: "
     "the speed-dependent restitution, by design",
+    "sequence model": "it varies, but measured / planar sequence model (every hit, the same e(v) and "
+    "tyre forces) does not: the sequence's physics, predicted",
     "unexplained": "none of the above",
 }
 
@@ -319,7 +340,9 @@ def speed_independence(
     themselves (or are fewer than two) and the first impulse / planar model varies by
     less than the limit across all speeds; ``restitution law`` if measured / planar model
     varies by less than the limit (the planar model takes the world's e(v) at the same
-    normal closing speed, so its ratio to Eq. 1 moves with e(v) only); otherwise
+    normal closing speed, so its ratio to Eq. 1 moves with e(v) only); ``sequence model``
+    if measured / planar sequence model varies by less than the limit (the sequence's
+    later hits, with the same e(v) and tyre forces, account for it); otherwise
     ``unexplained``.
 
     Args:
@@ -333,7 +356,8 @@ def speed_independence(
         sequence) and ``impulses`` per closing speed (keys as ``f"{v:g}"``), ``variation``,
         ``variation_single`` (single-impulse speeds only), ``variation_planar`` (measured /
         planar), ``variation_first`` (the first impulse / planar: where it is small, the
-        later hits carry the variation), ``multi_impact``, ``verdict``; ``flagged`` and ``unexplained`` (those
+        later hits carry the variation), ``variation_seq`` (measured / planar sequence model),
+        ``multi_impact``, ``verdict``; ``flagged`` and ``unexplained`` (those
         cells), the largest variation, and per restitution setting the counts per verdict.
     """
     by_cell: dict[tuple[str, str], list[Row]] = {}
@@ -352,6 +376,7 @@ def speed_independence(
         variation_single = _variation(ratio[single])
         variation_planar = _variation(measured / column(group, "dv_planar_a"))
         variation_first = _variation(column(group, "dv_first_a") / column(group, "dv_planar_a"))
+        variation_seq = _variation(measured / _optional(group, "dv_planar_seq_a"))
         if variation < limit:
             verdict = "steady"
         elif not (variation_single >= limit) and variation_first < limit:
@@ -362,6 +387,8 @@ def speed_independence(
             verdict = "multi-impact"
         elif variation_planar < limit:
             verdict = "restitution law"
+        elif variation_seq < limit:
+            verdict = "sequence model"
         else:
             verdict = "unexplained"
         cells.append(
@@ -374,6 +401,7 @@ def speed_independence(
                 "variation_single": variation_single,
                 "variation_planar": variation_planar,
                 "variation_first": variation_first,
+                "variation_seq": variation_seq,
                 "multi_impact": bool(not single.all()),
                 "verdict": verdict,
                 "ratio_min": float(np.nanmin(ratio)),
@@ -405,6 +433,7 @@ def speed_independence(
 
 __all__ = [
     "ANGLE_EDGES_DEG",
+    "CHECKED_MODELS",
     "MIN_BIN_COUNT",
     "MIN_DV_MS",
     "MIN_IMPACT_DV_MS",

@@ -28,7 +28,12 @@ PARTNER_COLOURS = {
     "pedestrian": "#56B4E9",
 }
 CLASS_MARKERS = {"central_collinear": "o", "oblique": "^", "offset": "s", "static": "D"}
-MODEL_COLOURS = {"Eq. 1": "#7f7f7f", "planar": "#0072B2", "correction": "#D55E00"}
+MODEL_COLOURS = {
+    "Eq. 1": "#7f7f7f",
+    "planar": "#0072B2",
+    "planar sequence": "#009E73",
+    "correction": "#D55E00",
+}
 
 
 def _pyplot():
@@ -59,7 +64,7 @@ def _colour(partner: str) -> str:
 def dv_scatter(out_dir: Path, rows: Sequence[Row]) -> str:
     """Measured against predicted delta-v of the partner, one panel per model."""
     plt = _pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(7.2, 3.6), sharex=True, sharey=True)
+    fig, axes = plt.subplots(1, len(DV_MODELS), figsize=(3.6 * len(DV_MODELS), 3.6), sharex=True, sharey=True)
     meas = column(rows, "dv_measured_b")
     finite = meas[np.isfinite(meas) & (meas > 0)]
     lo, hi = max(0.05, float(finite.min()) * 0.8), float(finite.max()) * 1.25
@@ -98,7 +103,7 @@ def dv_error_by_angle(out_dir: Path, rows: Sequence[Row]) -> str:
     """
     plt = _pyplot()
     references = (("sequence", "whole sequence"), ("first impulse", "first impulse"))
-    fig, axes = plt.subplots(2, 2, figsize=(7.2, 5.6), sharex=True)
+    fig, axes = plt.subplots(2, len(DV_MODELS), figsize=(3.6 * len(DV_MODELS), 5.6), sharex=True)
     angle = column(rows, "angle_deg")
     partners = [p for p in PARTNER_COLOURS if any(r["partner"] == p for r in rows)]
     for row_axes, (reference, label) in zip(axes, references, strict=True):
@@ -202,21 +207,28 @@ def held_back(out_dir: Path, summary: dict[str, Any], which: str = "held_back") 
 
     groups = summary[which]["groups"]
     names = [g for g in groups if not g.startswith(PARTNER_SEQUENCE)]  # those are in report.md
-    models = (("eq1", "Eq. 1"), ("planar", "planar"), ("correction", "correction"))
-    legend = {"Eq. 1": "Eq. 1", "planar": "planar impulse model",
+    models = (
+        ("eq1", "Eq. 1"),
+        ("planar", "planar"),
+        ("planar_seq", "planar sequence"),
+        ("correction", "correction"),
+    )
+    legend = {"Eq. 1": "Eq. 1", "planar": "planar impulse model (first impulse)",
+              "planar sequence": "planar sequence model (every impulse)",
               "correction": "Eq. 1 x angle-offset factor (retired)"}  # fmt: skip
     fig, axes = plt.subplots(2, 1, figsize=(7.2, 4.8), sharex=True)
     x = np.arange(len(names))
-    width = 0.26
+    width = 0.8 / len(models)
     for ax, stat, label in zip(axes, ("median_abs", "p95_abs"), ("median", "95th percentile"), strict=True):
         for k, (key, name) in enumerate(models):
             floor = 0.01  # [%]: the log axis shows the planar model's small errors
             mid = np.maximum(np.array([groups[g][key][stat]["median"] for g in names]) * 100, floor)
             low = np.maximum(np.array([groups[g][key][stat]["min"] for g in names]) * 100, floor)
             high = np.maximum(np.array([groups[g][key][stat]["max"] for g in names]) * 100, floor)
-            ax.bar(x + (k - 1) * width, mid - floor, width, bottom=floor, color=MODEL_COLOURS[name],
+            shift = (k - 0.5 * (len(models) - 1)) * width
+            ax.bar(x + shift, mid - floor, width, bottom=floor, color=MODEL_COLOURS[name],
                    label=legend[name])  # fmt: skip
-            ax.errorbar(x + (k - 1) * width, mid, yerr=[mid - low, high - mid], fmt="none", ecolor="black",
+            ax.errorbar(x + shift, mid, yerr=[mid - low, high - mid], fmt="none", ecolor="black",
                         lw=0.7, capsize=1.5)  # fmt: skip
         ax.set_yscale("log")
         ax.set_ylim(floor, None)
@@ -241,6 +253,7 @@ _VERDICT_STYLE = {
     "steady": {"lw": 0.7, "alpha": 0.8, "zorder": 2},
     "multi-impact": {"color": "#999999", "lw": 0.6, "ls": "--", "alpha": 0.7, "zorder": 1},
     "restitution law": {"color": "#555555", "lw": 1.0, "ls": ":", "zorder": 2},
+    "sequence model": {"color": "#009E73", "lw": 1.0, "ls": "-.", "zorder": 2},
     "unexplained": {"color": "black", "lw": 1.4, "zorder": 3},
 }
 
@@ -280,6 +293,7 @@ def speed_ratio(out_dir: Path, check: dict[str, Any]) -> str:
         "steady": f"steady: spread below {check['limit']:.0%} (partner colour)",
         "multi-impact": "multi-impact: single-impulse speeds and first impulse / planar steady",
         "restitution law": "restitution law: measured / planar model steady",
+        "sequence model": "sequence model: measured / planar sequence model steady",
         "unexplained": "unexplained",
     }
     handles = [

@@ -35,12 +35,26 @@ _MEASUREMENT_FIELDS = (
     "restitution", "duration", "peak_force", "peak_time", "max_penetration", "n_impulses",
     "first_impulse_share",
 )  # fmt: skip
+#: Pre-impact state of each body (world frame, the step before the first contact force):
+#: x, y [m], yaw [rad], vx, vy [m/s], yaw rate [rad/s], footprint length and width [m].
+STATE_FIELDS = ("x", "y", "yaw", "vx", "vy", "yaw_rate", "length", "width")
+#: The sequence-aware planar model (``harm_calibration.sequence``), per body: delta-v [m/s],
+#: its relative error, harm; and the number of pulses it predicts.
+SEQUENCE_FIELDS = ("dv_planar_seq", "dv_error_planar_seq", "harm_planar_seq")
+#: Columns added after the first release of the table: an older ``impacts.csv`` without
+#: them is read with nan (the sequence model then reports no errors for it).
+OPTIONAL_COLUMNS = (
+    tuple(f"{f}_{s}" for s in ("a", "b") for f in STATE_FIELDS)
+    + tuple(f"{f}_{s}" for s in ("a", "b") for f in SEQUENCE_FIELDS)
+    + ("n_pulses_planar_seq",)
+)
 #: Every column of ``impacts.csv``, in order.
 COLUMNS = (
     KEY_COLUMNS
     + tuple(f"{f}_{s}" for s in ("a", "b") for f in _BODY_FIELDS)
     + _MEASUREMENT_FIELDS
     + ("multi_impact",)
+    + OPTIONAL_COLUMNS
 )
 _TEXT = frozenset(
     {"id", "source", "partner", "restitution_set", "mode", "cell", "class", "status", "multi_impact"}
@@ -94,6 +108,10 @@ def row_from_impact(
         row[f"area_measured_{side}"] = c.area_measured or ""
         row[f"area_predicted_{side}"] = c.area_predicted or ""
         row[f"model_{side}"] = c.model or ""
+        if not body.is_static:
+            state = (*body.position, body.yaw, *body.velocity, body.yaw_rate, body.length, body.width)
+            for field, value in zip(STATE_FIELDS, state, strict=True):
+                row[f"{field}_{side}"] = float(value)
     for field in ("restitution", "duration", "peak_force", "peak_time", "max_penetration"):
         row[field] = _num(getattr(meas, field))
     row["n_impulses"] = float(meas.n_impulses)
@@ -164,13 +182,17 @@ def read_rows(path: Path) -> list[Row]:
     """
     with path.open(newline="", encoding="utf-8") as handle:
         reader = csv.DictReader(handle)
-        missing = [c for c in COLUMNS if c not in (reader.fieldnames or ())]
+        present = set(reader.fieldnames or ())
+        missing = [c for c in COLUMNS if c not in present and c not in OPTIONAL_COLUMNS]
         if missing:
             raise ValueError(f"{path}: missing columns {missing}")
         rows = []
         for line, raw in enumerate(reader, start=2):
             row: Row = {}
             for key in COLUMNS:
+                if key not in present:
+                    row[key] = math.nan
+                    continue
                 text = raw[key]
                 if key in _TEXT:
                     row[key] = text

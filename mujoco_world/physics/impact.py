@@ -51,10 +51,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ethical_planner.harm import ReducedArea, clock_area, reduced_area
+from ethical_planner.impulse import SkidModel
 from ethical_planner.records import to_plain
 from ethical_planner.road_users import KinematicState
 from ethical_planner.validation import check, check_positive
-from mujoco_world.physics.control import ControlConfig, brake_forces
+from mujoco_world.physics.control import GRAVITY, ControlConfig, brake_forces
 from mujoco_world.physics.scene import STATIC, BodyProxy, Scene
 from mujoco_world.scenario.spec import ContactSpec
 
@@ -625,6 +626,23 @@ class ImpactRecorder:
             multi_body=seq.multi_body,
             ended_in_contact=seq.ended_in_contact,
         )
+
+
+def skid_model(control: ControlConfig | None = None, window: MeasurementWindow | None = None) -> SkidModel:
+    """The tyre forces on crashed bodies of this world, for ``planar_impulse_sequence``.
+
+    ``brake_forces`` with the controller's friction, yaw limit and time constant; no
+    braking within ``window.pulse_gap`` of a contact force (as in ``ImpactRig`` with
+    ``brake=True``, the sweeps' setting).
+    """
+    control = control or ControlConfig()
+    window = window or MeasurementWindow()
+    return SkidModel(
+        deceleration=control.friction_mu * GRAVITY,
+        yaw_deceleration=control.torque_limit_per_inertia,
+        time_constant=control.brake_time_constant,
+        delay=window.pulse_gap,
+    )
 
 
 def _state_velocity(state: KinematicState) -> tuple[float, float]:
