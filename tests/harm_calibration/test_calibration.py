@@ -185,3 +185,33 @@ def test_speed_independence_flags_cells_and_names_the_cause():
     assert (counts["flagged"], counts["unexplained"], counts["multi-impact"], counts["restitution law"]) == (
         5, 3, 1, 1,
     )  # fmt: skip
+
+
+def test_the_sequence_model_is_held_back_checked_and_explains_speed_variation():
+    """A model that follows the whole sequence: in the held-back table, the checks, the speed verdicts."""
+    rows = synthetic_rows(np.random.default_rng(4), n_cells=12)
+    truck = sorted({r["cell"] for r in rows if r["partner"] == "truck"})[0]
+    for r in rows:
+        r["dv_planar_seq_a"] = r["dv_measured_a"] * 1.01
+        if r["cell"] == truck:  # later hits grow with speed; only the sequence model has them
+            r["multi_impact"] = "yes"
+            r["dv_measured_a"] *= 1.0 + 0.03 * r["closing_speed"]
+            r["dv_first_a"] *= 1.0 + 0.03 * r["closing_speed"]
+            r["dv_planar_seq_a"] = r["dv_measured_a"] * 0.98
+    result = held_back_evaluation(rows, seeds=range(5))
+    seq = result["groups"]["all"]["planar_seq"]["median_abs"]["median"]
+    assert seq == pytest.approx(0.01 / 1.01, rel=0.05)
+    checks = {c["group"]: c for c in done_checks(result, "planar_seq")}
+    assert checks["all"]["model"] == "planar_seq" and checks["all"]["p95_no_worse"]
+    with pytest.raises(ValueError, match="model must be one of"):
+        done_checks(result, "correction")
+    verdicts = {c["cell"]: c for c in speed_independence(rows, partners=("truck",))["cells"]}
+    assert verdicts[truck]["verdict"] == "sequence model"
+    assert verdicts[truck]["variation_seq"] < 0.01
+    # A table without the sequence model's column (an older impacts.csv): nan, never an error.
+    for r in rows:
+        del r["dv_planar_seq_a"]
+    old = held_back_evaluation(rows, seeds=range(2))
+    assert math.isnan(old["groups"]["all"]["planar_seq"]["median_abs"]["median"])
+    without = {c["cell"]: c["verdict"] for c in speed_independence(rows, partners=("truck",))["cells"]}
+    assert without[truck] == "unexplained"
