@@ -26,9 +26,25 @@ from ethical_planner.geometry import rectangle_half_extent
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.registry import Registry
 from ethical_planner.road_users import LegalCorridor, RoadUserType
+from mujoco_world.agents.lane_change import (
+    LOOK_BACK_M,
+    SIDES,
+    IdmParameters,
+    LaneLayout,
+    MobilDecision,
+    lane_neighbours,
+    mobil_step,
+)
 from mujoco_world.physics.safety import time_to_collision
 from mujoco_world.scenario.recorded_tracks import RecordedTracks
-from mujoco_world.scenario.spec import ActionSpec, BehaviourKind, ConditionSpec, RoadUserSpec
+from mujoco_world.scenario.spec import (
+    ActionSpec,
+    BehaviourKind,
+    ConditionSpec,
+    EgoReaction,
+    IdmSpec,
+    RoadUserSpec,
+)
 
 #: Resampling step of the routes [m].
 ROUTE_STEP_M = 0.25
@@ -161,6 +177,10 @@ class Fleet:
         road_speed_limit: [m/s], for legal corridors without their own limit.
         tick: behaviour period [s].
         lane_width: [m], for scripted lane changes.
+        lanes: the lanes MOBIL road users may change into and where lanes end (None:
+            every lane of the road is theirs, none ends).
+        ego_desired_speed: [m/s], the ego's desired speed when MOBIL weighs the ego as a
+            follower (None: the road's speed limit).
     """
 
     def __init__(
@@ -170,6 +190,8 @@ class Fleet:
         road_speed_limit: float,
         tick: float = 0.05,
         lane_width: float = 3.5,
+        lanes: LaneLayout | None = None,
+        ego_desired_speed: float | None = None,
     ) -> None:
         self.specs = tuple(specs)
         self.k = len(self.specs)
@@ -204,6 +226,7 @@ class Fleet:
             self.delay.append(deque([0.0] * ticks) if ticks > 0 else None)
         self.lane_width = float(lane_width)
         self.script = Script(self.specs)
+        self._setup_lanes(lanes, ego_desired_speed)
         self._kind = [u.behaviour.kind for u in self.specs]
         self._models_by_kind = {kind: BEHAVIOURS.get(kind.value) for kind in dict.fromkeys(self._kind)}
         self._kind_mask = {kind: np.array([k is kind for k in self._kind]) for kind in self._models_by_kind}
@@ -215,6 +238,65 @@ class Fleet:
                 rows = np.flatnonzero(self._kind_mask[kind])
                 self._given.append((model, rows, model.setup(self, rows)))
                 self.exit_s[rows] = math.inf
+
+    def _setup_lanes(self, lanes: LaneLayout | None, ego_desired_speed: float | None) -> None:
+        """Per road user: route lane and direction, whom it sees, MOBIL parameters and state."""
+        specs = self.specs
+        self.lanes = lanes
+        self.route_lane = np.array([u.route.lane for u in specs], dtype=np.int64)
+        self.direction = np.array([u.route.direction for u in specs], dtype=np.int64)
+        #: (k,) bool: idm road users blind to the ego (``ego_reaction = "none"``).
+        self.blind_to_ego = np.array(
+            [u.behaviour.ego_reaction is EgoReaction.NONE for u in specs], dtype=bool
+        )
+        #: (k,) bool: road users that change lanes with MOBIL.
+        self.mobil = np.array([u.behaviour.mobil is not None for u in specs], dtype=bool)
+        mobil = [u.behaviour.mobil for u in specs]
+        self._mobil_params = {
+            name: np.array([getattr(p, name) if p is not None else 0.0 for p in mobil])
+            for name in ("politeness", "threshold", "b_safe", "bias_right", "duration", "cooldown")
+        }
+        #: (k,) time before which a MOBIL road user does not decide (changing lane, cooldown) [s].
+        self.mobil_busy_until = np.full(self.k, -math.inf)
+        #: Lane changes MOBIL made: (time [s], road user index, from lane, to lane), lanes
+        #: from the right in its direction.
+        self.lane_changes: list[tuple[float, int, int, int]] = []
+        #: The last tick's MOBIL decision of the MOBIL road users (rows ``flatnonzero(mobil)``).
+        self.last_mobil: MobilDecision | None = None
+        # The lane end on each road user's route lane (a standing obstacle), along the main road [m].
+        self.route_lane_end = (
+            lanes.end_of(self.route_lane, self.direction) if lanes is not None else np.full(self.k, np.inf)
+        )
+        # IDM parameters of every body (entity 0 the ego), for the accelerations MOBIL weighs:
+        # an idm road user's own, the defaults for the others (desired speed: the ego's, or
+        # the larger of the body's speed and the road's limit).
+        default = IdmSpec()
+        idms = [default, *(u.behaviour.idm or default for u in specs)]
+        self._idm_static = {
+            "a_max": np.array([p.max_acceleration for p in idms]),
+            "b_comf": np.array([p.comfort_deceleration for p in idms]),
+            "headway": np.array([p.time_headway for p in idms]),
+            "min_gap": np.array([p.min_gap for p in idms]),
+        }
+        self._is_idm = np.array([False, *(u.behaviour.kind is BehaviourKind.IDM for u in specs)])
+        self._v0 = np.array(
+            [
+                ego_desired_speed if ego_desired_speed is not None else self.road_speed_limit,
+                *(u.behaviour.speed for u in specs),
+            ],
+            dtype=float,
+        )
+
+    def idm_parameters(self, speeds: np.ndarray, v0_rows: np.ndarray, rows: np.ndarray) -> IdmParameters:
+        """IDM parameters of every body (n = k + 1), with desired speeds ``v0_rows`` for ``rows``.
+
+        Args:
+            speeds: (n,) body speeds [m/s]. v0_rows: desired speeds of road users ``rows``.
+        """
+        v0 = np.where(self._is_idm, self._v0, np.maximum(speeds, self.road_speed_limit))
+        v0[0] = self._v0[0]
+        v0[rows + 1] = v0_rows
+        return IdmParameters(v0=v0, **self._idm_static)
 
     # ------------------------------------------------------------------ states
 
@@ -561,8 +643,24 @@ class _IntelligentDriver:
     moves = True
 
     def prepare(self, fleet: Fleet, rows: np.ndarray, view: WorldView) -> dict[int, tuple[float, float]]:
-        gaps, speeds = _leaders(fleet, rows, view)
-        return {int(i): (float(g), float(v)) for i, g, v in zip(rows, gaps, speeds, strict=True)}
+        out: dict[int, tuple[float, float]] = {}
+        mobil = fleet.mobil[rows]
+        keep = rows[~mobil]
+        if keep.size:
+            gaps, speeds = _leaders(fleet, keep, view)
+            # A lane that ends (merge roads) is a standing obstacle for a road user in it.
+            end_gap = fleet.route_lane_end[keep] - fleet.s[keep] - 0.5 * view.length[keep + 1]
+            in_lane = np.abs(fleet.d[keep]) < 0.5 * fleet.lane_width
+            end_first = in_lane & (end_gap < gaps)
+            gaps = np.where(end_first, end_gap, gaps)
+            speeds = np.where(end_first, 0.0, speeds)
+            out.update({int(i): (float(g), float(v)) for i, g, v in zip(keep, gaps, speeds, strict=True)})
+        if mobil.any():
+            gaps, speeds = _change_lanes(fleet, rows[mobil], view)
+            out.update(
+                {int(i): (float(g), float(v)) for i, g, v in zip(rows[mobil], gaps, speeds, strict=True)}
+            )
+        return out
 
     def acceleration(
         self, fleet: Fleet, i: int, since: float, view: WorldView, context: dict[int, tuple[float, float]]
@@ -646,7 +744,8 @@ def _leaders(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarra
 
     Every other body is projected onto the first ``look_ahead`` metres of each
     route (sampled every metre, refined along the tangent); it leads if it
-    overlaps the route's lane laterally. Vectorised over rows and bodies.
+    overlaps the route's lane laterally. Vectorised over rows and bodies. A road
+    user blind to the ego (``ego_reaction = "none"``) does not see it.
 
     Returns:
         (gap, speed), each (m,); inf and 0 where nothing is ahead.
@@ -681,6 +780,7 @@ def _leaders(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarra
         & (samples[nearest] <= limit[:, None])
     )
     valid[np.arange(m), me] = False
+    valid[:, 0] &= ~fleet.blind_to_ego[rows]
     gap = np.where(valid, gap, np.inf)
     j = np.argmin(gap, axis=1)
     best = gap[np.arange(m), j]
@@ -688,6 +788,81 @@ def _leaders(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarra
     hj = heading[np.arange(m), j]
     speed = np.where(np.isfinite(best), vel[:, 0] * np.cos(hj) + vel[:, 1] * np.sin(hj), 0.0)
     return best, speed
+
+
+def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarray, np.ndarray]:
+    """MOBIL for the road users ``rows`` (m,): start the lane changes it decides, return their leaders.
+
+    Leaders and followers are read in the lanes the road user occupies and in those on
+    either side (``lane_change.lane_neighbours``: the ego is a body like any other,
+    unless the road user is blind to it); a road user that is not changing lane and
+    whose cooldown is over changes if MOBIL says so (``lane_change.mobil_step``), with
+    the scripts' smooth lateral move over ``mobil.duration``. Its IDM leader is the
+    nearest one in any lane its footprint occupies: during a change the old and the
+    target lane's, after it the target lane's.
+
+    Returns:
+        (gap [m], speed [m/s]) of each road user's leader, each (m,); inf and 0: none.
+    """
+    t = view.time
+    m = rows.size
+    me = rows + 1
+    w = fleet.lane_width
+    look_ahead = np.array([fleet.specs[i].behaviour.idm.look_ahead for i in rows])
+    samples = np.arange(-LOOK_BACK_M, float(look_ahead.max()) + 1e-9, 1.0)
+    s_abs = np.maximum(fleet.s[rows, None] + samples[None, :], 0.0)
+    x, y, theta, _ = fleet.routes.lookup(rows[:, None], s_abs)
+    s_rel = s_abs - fleet.s[rows, None]
+    n = view.position.shape[0]
+    sees = np.ones((m, n), dtype=bool)
+    sees[:, 0] = ~fleet.blind_to_ego[rows]
+    can_follow = np.array([ty is not RoadUserType.PEDESTRIAN for ty in view.types])
+    current = np.rint(fleet.d[rows] / w).astype(np.int64)
+    lane = fleet.route_lane[rows, None] + current[:, None] + SIDES[None, :]
+    direction = fleet.direction[rows, None]
+    half = 0.5 * view.length[me]
+    lanes = fleet.lanes
+    if lanes is not None:
+        end_gap = lanes.end_of(lane, direction) - fleet.s[rows, None] - half[:, None]
+        allowed = lanes.allowed(lane, direction)
+    else:
+        end_gap = np.full((m, 3), np.inf)
+        allowed = np.ones((m, 3), dtype=bool)
+    nb = lane_neighbours(
+        x, y, theta, s_rel, me, fleet.d[rows], w,
+        view.position, view.velocity, view.yaw, view.length, view.width,
+        can_follow, sees, end_gap,
+    )  # fmt: skip
+    params = fleet._mobil_params
+    p = {name: values[rows] for name, values in params.items()}
+    v = fleet.v[rows]
+    # A lane is a target only if it runs the road user's way and does not end before the change is done.
+    allowed &= end_gap > v[:, None] * p["duration"][:, None] + 5.0
+    since = t - fleet.activated_at[rows]
+    v0 = np.array([max(fleet.target_speed(int(i), float(a)), 0.1) for i, a in zip(rows, since, strict=True)])
+    speeds = np.hypot(view.velocity[:, 0], view.velocity[:, 1])
+    idm = fleet.idm_parameters(speeds, v0, rows)
+    ready = (t >= fleet.mobil_busy_until[rows]) & np.isfinite(since) & fleet.active[rows]
+    decision = mobil_step(nb, me, v, idm, allowed, p["politeness"], p["threshold"], p["b_safe"],
+                          p["bias_right"], ready)  # fmt: skip
+    fleet.last_mobil = decision
+    for r in np.flatnonzero(decision.change):
+        i = int(rows[r])
+        d0 = float(fleet.d[i])
+        target = float((current[r] + decision.change[r]) * w)
+        duration = float(p["duration"][r])
+        fleet.script.lateral[i] = (t, ((0.0, d0), (duration, target)))
+        fleet.mobil_busy_until[i] = t + duration + float(p["cooldown"][r])
+        start = int(fleet.route_lane[i] + current[r])
+        fleet.lane_changes.append((t, i, start, start + int(decision.change[r])))
+    # The leader: the nearest in any lane the road user's footprint occupies (both during a change).
+    changing = decision.change != 0
+    occupied = nb.occupied.copy()
+    occupied[changing, 1 + decision.change[changing]] = True
+    gaps = np.where(occupied, nb.lead_gap, np.inf)
+    k = np.argmin(gaps, axis=1)
+    gap = gaps[np.arange(m), k]
+    return gap, np.where(np.isfinite(gap), nb.lead_speed[np.arange(m), k], 0.0)
 
 
 def _gap_clear(i: int, view: WorldView, gap_time: float, corridor: float) -> bool:

@@ -25,6 +25,7 @@ from ethical_planner.reference_path import ReferencePath
 from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
 from ethical_planner.validation import check_non_negative, parse_enum
 from mujoco_world.agents.behaviour import Fleet, WorldView
+from mujoco_world.agents.lane_change import lane_layout
 from mujoco_world.physics.control import (
     GRAVITY,
     ControlConfig,
@@ -159,6 +160,9 @@ class World:
         ego = scenario.ego
         if scenario.road.kind is RoadKind.MAP:
             ego_route = self.road.main_line
+        elif scenario.road.kind is RoadKind.MERGE and ego.lane == 0:
+            # A ramp start: the reference path merges into the main road's right lane.
+            ego_route = self.road.merge_route(ego.s0)
         else:
             ego_route = self.road.route(RouteSpec(road=RoadName.MAIN, lane=ego.lane, turn=ego.turn))
         self.ego_path = ReferencePath.from_polyline(ego_route)
@@ -173,13 +177,22 @@ class World:
                 "20 m before the end"
             )
         users = scenario.road_users
+        on_merge = scenario.road.kind is RoadKind.MERGE
         recorded = [u.behaviour.kind is BehaviourKind.RECORDED for u in users]
         # A recorded body needs no route: it gets a short stand-in (shared by all of them).
         routes = [
             _STAND_IN_ROUTE if is_recorded else self.road.route(u.route)
             for u, is_recorded in zip(users, recorded, strict=True)
         ]
-        self.fleet = Fleet(users, routes, scenario.road.speed_limit, behaviour_tick, scenario.road.lane_width)
+        self.fleet = Fleet(
+            users,
+            routes,
+            scenario.road.speed_limit,
+            behaviour_tick,
+            scenario.road.lane_width,
+            lanes=lane_layout(scenario) if any(u.behaviour.mobil for u in users) or on_merge else None,
+            ego_desired_speed=ego.desired_speed,
+        )
         proxies = [BodyProxy("ego", ego.type, ego.length, ego.width, ego.mass)]
         # A recorded body's recording already says where it went, and a mapped road's
         # parked bodies may stand on the kerb (pavement parking): kerbs do not stop them.
@@ -382,6 +395,8 @@ class World:
             width, offsets = spec.map.lane_width, spec.map.lane_offsets
         else:
             lane = self.scenario.ego.lane
+            if spec.kind is RoadKind.MERGE and lane == 0:
+                lane = 1  # its reference path ends in lane 1 (``RoadGeometry.merge_route``)
             width = spec.lane_width
             offsets = tuple((k - lane) * spec.lane_width for k in range(spec.lanes))
         area = self.road.drivable_area

@@ -262,6 +262,46 @@ class RoadGeometry:
         bend = _bezier(entry[-1], heading_in, exit_[0], heading_out)
         return _dedupe(np.concatenate([entry, bend[1:-1], exit_]))
 
+    def lane_lines(self) -> tuple[np.ndarray, ...]:
+        """Lane markings [m]: the edges of every lane of the main (and cross) road, each (k, 2).
+
+        On a merge road the acceleration lane's outer edge follows its taper and ends
+        at ``lane_drop``.
+        """
+        spec = self.spec
+        lines = []
+        for line in (self.main_line, self.cross_line):
+            if line is None:
+                continue
+            for i in range(spec.lanes + 1):
+                lines.append(offset_polyline(line, -spec.half_width + i * spec.lane_width))
+        if spec.kind is RoadKind.MERGE:
+            x = self.main_line[:, 0]
+            keep = x <= spec.lane_drop
+            lines[0] = np.column_stack([x[keep], _merge_edge(spec, x[keep], shoulder=0.0)])
+        return tuple(lines)
+
+    def merge_route(self, s_start: float) -> np.ndarray:
+        """The route from the acceleration lane into the main road's right lane [m], (n, 2).
+
+        The offset moves from lane 0's centre to lane 1's along a quintic smoothstep
+        (zero slope and curvature at both ends) over the 80 m (at most; from 10 m past
+        ``s_start``) before the taper starts: the ego's reference path for a ramp start,
+        which its planner's Frenet frame follows.
+
+        Args:
+            s_start: the ego's start along the main road [m].
+        """
+        spec = self.spec
+        check(spec.kind is RoadKind.MERGE, "merge_route needs road.kind = 'merge'")
+        s2 = spec.lane_drop - spec.taper
+        s1 = max(s_start + 10.0, s2 - 80.0)
+        x = self.main_line[:, 0]
+        u = np.clip((x - s1) / max(s2 - s1, 1.0), 0.0, 1.0)
+        d0 = -spec.half_width + 0.5 * spec.lane_width
+        d = d0 + spec.lane_width * (10 * u**3 - 15 * u**4 + 6 * u**5)
+        return np.column_stack([x, d])
+
     # ------------------------------------------------------------------ obstacles
 
     def static_boxes(self) -> tuple[StaticBox, ...]:
@@ -413,10 +453,30 @@ def _map_road(spec: RoadSpec) -> RoadGeometry:
     return RoadGeometry(spec, main, None, area, tuple(b for b in boundaries if len(b) >= 2))
 
 
+def _merge_edge(spec: RoadSpec, x: np.ndarray, shoulder: float) -> np.ndarray:
+    """Right edge y [m] of a merge road at x [m]: the acceleration lane's, narrowing over the taper."""
+    full = -(spec.half_width + spec.parking_width + shoulder)
+    dropped = -(spec.half_width - spec.lane_width + shoulder)
+    u = np.clip((x - (spec.lane_drop - spec.taper)) / spec.taper, 0.0, 1.0)
+    return full + (dropped - full) * u
+
+
+def _merge_road(spec: RoadSpec) -> RoadGeometry:
+    """A straight one-way road whose right-most lane narrows over the taper and ends at ``lane_drop``."""
+    main = _main_line(RoadSpec(length=spec.length))
+    x = np.union1d(main[:, 0], [spec.lane_drop - spec.taper, spec.lane_drop])
+    right = np.column_stack([x, _merge_edge(spec, x, spec.shoulder)])
+    left = offset_polyline(main, spec.half_width + spec.shoulder)
+    area = Polygon(np.concatenate([right, left[::-1]]))
+    return RoadGeometry(spec, main, None, area, (left, right))
+
+
 def build_road(spec: RoadSpec) -> RoadGeometry:
     """Build the road geometry of ``spec``."""
     if spec.kind is RoadKind.MAP:
         return _map_road(spec)
+    if spec.kind is RoadKind.MERGE:
+        return _merge_road(spec)
     main = _main_line(spec)
     right = spec.half_width + spec.parking_width + spec.shoulder
     left = spec.half_width + spec.shoulder

@@ -62,6 +62,8 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "road.radius": (5.0, 10000.0, "m"),
     "road.lead_in": (0.0, 20000.0, "m"),
     "road.corner_radius": (0.0, 50.0, "m"),
+    "road.lane_drop": (10.0, 20000.0, "m"),
+    "road.taper": (1.0, 1000.0, "m"),
     "route.offset": (-20.0, 20.0, "m"),
     "idm.time_headway": (0.0, 10.0, "s"),
     "idm.min_gap": (0.0, 50.0, "m"),
@@ -70,6 +72,12 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "idm.max_deceleration": (0.1, 15.0, "m/s^2"),
     "idm.reaction_time": (0.0, 3.0, "s"),
     "idm.look_ahead": (1.0, 1000.0, "m"),
+    "mobil.politeness": (-1.0, 5.0, "-"),
+    "mobil.threshold": (0.0, 5.0, "m/s^2"),
+    "mobil.b_safe": (0.5, 15.0, "m/s^2"),
+    "mobil.bias_right": (0.0, 5.0, "m/s^2"),
+    "mobil.duration": (1.0, 15.0, "s"),
+    "mobil.cooldown": (0.0, 60.0, "s"),
     "crossing.wait_at": (0.0, 20000.0, "m"),
     "crossing.gap_time": (0.0, 60.0, "s"),
     "crossing.corridor": (0.5, 100.0, "m"),
@@ -154,6 +162,7 @@ class RoadKind(StrEnum):
     CURVED = "curved"
     INTERSECTION = "intersection"
     MAP = "map"
+    MERGE = "merge"
 
 
 class Boundary(StrEnum):
@@ -226,7 +235,9 @@ class RoadSpec:
         kind: straight, curved (lead-in, arc, straight remainder), a four-way
             intersection of the main road (along x) and a cross road (along y), or a
             map (``map`` gives the geometry; ``length`` is the length of its reference
-            path, the lane and curve fields are not used).
+            path, the lane and curve fields are not used), or a merge: a straight
+            one-way carriageway (every lane runs along +x) whose right-most lane 0 is an
+            acceleration lane that narrows over ``taper`` and ends at ``lane_drop``.
         length: centre-line length of the main road [m] (and of the cross road).
         lanes: number of lanes of each road, both directions together.
         lanes_forward: how many of them run along the road's reference direction
@@ -248,6 +259,10 @@ class RoadSpec:
         lead_in: straight before the arc [m] (curved only).
         corner_radius: kerb radius at the intersection corners [m].
         map: the road's geometry (``kind = "map"`` only).
+        lane_drop: merge roads: arc length along the main road where the acceleration
+            lane (lane 0, the right-most) has ended [m].
+        taper: merge roads: length of the taper before ``lane_drop`` over which the
+            acceleration lane narrows from full width to nothing [m].
     """
 
     kind: RoadKind = RoadKind.STRAIGHT
@@ -264,6 +279,8 @@ class RoadSpec:
     lead_in: float = 40.0
     corner_radius: float = 8.0
     map: MapSpec | None = None
+    lane_drop: float = 150.0
+    taper: float = 50.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kind", parse_enum(RoadKind, self.kind, "road kind", "road.kind"))
@@ -312,6 +329,17 @@ class RoadSpec:
                 self.lead_in + self.arc_length <= self.length,
                 f"road.length ({self.length} m) must cover lead_in + arc "
                 f"({self.lead_in + self.arc_length:.1f} m)",
+            )
+        if self.kind is RoadKind.MERGE:
+            check(
+                self.lanes >= 2,
+                f"road.lanes of a merge road counts the acceleration lane and the main road's lanes "
+                f"(at least 2), got {self.lanes}",
+            )
+            check(
+                self.taper < self.lane_drop <= self.length - 10.0,
+                f"road.lane_drop ({self.lane_drop:g} m) must lie after road.taper ({self.taper:g} m) and "
+                f"at least 10 m before the road's end ({self.length:g} m)",
             )
         if self.kind is RoadKind.INTERSECTION:
             check(
@@ -440,6 +468,60 @@ class IdmSpec:
             not math.isnan(self.stop_until) and self.stop_until >= 0,
             f"idm.stop_until must be >= 0 s (inf allowed), got {self.stop_until}",
         )
+
+
+class EgoReaction(StrEnum):
+    """How an idm road user reacts to the ego.
+
+    none: blind to the ego (a scripted hazard): it neither follows nor brakes for it,
+        and its lane changes ignore it.
+    idm: the ego is a vehicle like any other: followed and braked for as a leader,
+        and counted as leader and follower by MOBIL (its safety criterion protects the
+        ego when it would be the new follower).
+    """
+
+    NONE = "none"
+    IDM = "idm"
+
+
+@dataclass(frozen=True, slots=True)
+class MobilSpec:
+    """Reactive lane changes with MOBIL (Kesting, Treiber, Helbing 2007) for an idm road user.
+
+    At each behaviour tick a road user not already changing lane weighs a change to
+    each neighbouring lane of its own direction, with IDM accelerations computed in
+    the current and the target lane (``agents.lane_change``):
+    ``(a~_c - a_c) + politeness ((a~_n - a_n) + (a~_o - a_o)) +- bias_right > threshold``
+    (``+`` for a change to the right, ``-`` to the left: European keep-right rule), and
+    changes if also the new follower and itself stay above ``-b_safe`` (safety).
+
+    Attributes:
+        politeness: p, weight of the followers' acceleration changes [-] (0 selfish).
+        threshold: incentive threshold Delta a_th [m/s^2].
+        b_safe: safe braking limit of the new follower and of itself [m/s^2].
+        bias_right: keep-right bias Delta a_bias [m/s^2].
+        duration: time of the lateral move [s].
+        cooldown: time after a lane change ends before the next decision [s].
+    """
+
+    politeness: float = 0.3
+    threshold: float = 0.1
+    b_safe: float = 4.0
+    bias_right: float = 0.2
+    duration: float = 4.0
+    cooldown: float = 2.0
+
+    def __post_init__(self) -> None:
+        check_finite(
+            "mobil",
+            politeness=self.politeness,
+            threshold=self.threshold,
+            b_safe=self.b_safe,
+            bias_right=self.bias_right,
+            duration=self.duration,
+            cooldown=self.cooldown,
+        )
+        check_plausible("mobil", self)
 
 
 @dataclass(frozen=True, slots=True)
@@ -642,6 +724,8 @@ class BehaviourSpec:
         crossing: gap acceptance (kind pedestrian; defaults if omitted).
         trajectory: the recording to follow (kind recorded only, required there).
         events: a script of triggered actions, run in order (``EventSpec``).
+        mobil: reactive lane changes (kind idm only; None: it keeps its lane).
+        ego_reaction: how it reacts to the ego (kind idm only; default ``idm``).
     """
 
     kind: BehaviourKind = BehaviourKind.SCRIPTED
@@ -654,6 +738,8 @@ class BehaviourSpec:
     crossing: CrossingSpec | None = None
     trajectory: RecordedTrajectory | None = None
     events: tuple[EventSpec, ...] = ()
+    mobil: MobilSpec | None = None
+    ego_reaction: EgoReaction | None = None
 
     def __post_init__(self) -> None:
         kind = parse_enum(BehaviourKind, self.kind, "behaviour kind", "behaviour.kind")
@@ -676,8 +762,23 @@ class BehaviourSpec:
         if kind is BehaviourKind.IDM:
             if self.idm is None:
                 object.__setattr__(self, "idm", IdmSpec())
+            reaction = EgoReaction.IDM if self.ego_reaction is None else self.ego_reaction
+            object.__setattr__(
+                self,
+                "ego_reaction",
+                parse_enum(EgoReaction, reaction, "ego reaction", "behaviour.ego_reaction"),
+            )
         else:
             check(self.idm is None, f"behaviour.idm is only allowed with kind 'idm', not {kind.value!r}")
+            check(
+                self.mobil is None,
+                f"behaviour.mobil (lane changes) is only allowed with kind 'idm', not {kind.value!r}",
+            )
+            check(
+                self.ego_reaction is None,
+                f"behaviour.ego_reaction is only allowed with kind 'idm', not {kind.value!r} "
+                "(scripted and recorded road users are blind to the ego)",
+            )
         if kind is BehaviourKind.PEDESTRIAN:
             if self.crossing is None:
                 object.__setattr__(self, "crossing", CrossingSpec())
@@ -1395,6 +1496,7 @@ class Scenario:
                 "ego.turn is only allowed on an intersection road",
             )
         self._check_events()
+        self._check_lane_changes()
         for i, user in enumerate(self.road_users):
             where = f"road_users[{i}] ({user.name})"
             route = user.route
@@ -1542,6 +1644,35 @@ class Scenario:
                         f"road_users[{i}] ({user.name}).behaviour.events[{k}].when.{key}: a road user "
                         f"measures to others (use of = 'self' for its own state)",
                     )
+
+    def _check_lane_changes(self) -> None:
+        """MOBIL road users drive on numbered lanes of a straight, curved or merge road.
+
+        A map road's or waypoint route's lanes have no numbers to change between, and
+        an intersection's turns leave the lanes they start in.
+        """
+        road = self.road
+        if road.kind is RoadKind.MERGE and self.ego.lane == 0 and self.ego.pose is None:
+            merge_at = road.lane_drop - road.taper
+            check(
+                self.ego.s0 <= merge_at - 20.0,
+                f"ego.s0 ({self.ego.s0:g} m) on the acceleration lane (ego.lane = 0) must lie at least 20 m "
+                f"before its taper starts (road.lane_drop - road.taper = {merge_at:g} m) to merge",
+            )
+        for i, user in enumerate(self.road_users):
+            if user.behaviour.mobil is None:
+                continue
+            where = f"road_users[{i}] ({user.name}).behaviour.mobil"
+            check(
+                self.road.kind in (RoadKind.STRAIGHT, RoadKind.CURVED, RoadKind.MERGE),
+                f"{where}: lane changes need a straight, curved or merge road, not road.kind = "
+                f"{self.road.kind.value!r}",
+            )
+            check(
+                user.route.road is RoadName.MAIN,
+                f"{where}: lane changes need a route on the main road's lanes, not route.road = "
+                f"{user.route.road.value!r}",
+            )
 
 
 def scenario_from_dict(data: dict[str, Any]) -> Scenario:
