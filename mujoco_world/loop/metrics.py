@@ -452,6 +452,26 @@ class ScriptEvents(Metric):
         return {"script_events": fired} if fired else {}
 
 
+class LaneChanges(Metric):
+    """The lane changes MOBIL road users made (``BehaviourSpec.mobil``).
+
+    Value: ``lane_changes``, a list of (road user name, time [s], from lane, to lane),
+    lanes from the right in the road user's direction; nothing for scenarios without
+    MOBIL road users.
+    """
+
+    def values(self, run: RunState) -> dict[str, Any]:
+        """``lane_changes`` in ``extra_metrics``."""
+        fleet = run.world.fleet
+        if not fleet.k or not fleet.mobil.any():
+            return {}
+        return {
+            "lane_changes": [
+                (fleet.specs[i].name, round(t, 6), start, end) for t, i, start, end in fleet.lane_changes
+            ]
+        }
+
+
 def default_metrics(config: RunConfig) -> tuple[Metric, ...]:
     """The built-in metrics (every metric field of ``RunSummary``)."""
     return (
@@ -467,4 +487,5 @@ def default_metrics(config: RunConfig) -> tuple[Metric, ...]:
         Progress(),
         RuleViolations(),
         ScriptEvents(),
+        LaneChanges(),
     )

@@ -31,6 +31,7 @@ from mujoco_world.scenario.spec import (
     ExpectSpec,
     IdmSpec,
     LegalSpec,
+    MobilSpec,
     RoadSpec,
     RoadUserSpec,
     RouteSpec,
@@ -72,6 +73,11 @@ def _idm(speed: float, **params: float) -> BehaviourSpec:
 
 def _scripted(speed: float, **kw) -> BehaviourSpec:
     return BehaviourSpec(kind="scripted", speed=speed, **kw)
+
+
+def _mobil(speed: float, ego_reaction: str = "idm", **params: float) -> BehaviourSpec:
+    """An idm road user that changes lanes with MOBIL (default parameters unless given)."""
+    return BehaviourSpec(kind="idm", speed=speed, mobil=MobilSpec(**params), ego_reaction=ego_reaction)
 
 
 def _parked() -> BehaviourSpec:
@@ -754,6 +760,71 @@ def scrape_wall_for_child(rng: np.random.Generator | None = None) -> Scenario:
 # --------------------------------------------------------------------------- registry
 
 
+def on_ramp_merge(rng: np.random.Generator | None = None) -> Scenario:
+    """The ego merges from an on-ramp into a gap between MOBIL/IDM cars on a two-lane road."""
+    draw = _Draw(rng)
+    main_speed = draw(20.0, 17.0, 23.0)
+    # Main road (lanes 1 and 2): a platoon in the right lane with one wide gap, a faster
+    # car in the left lane; a car on the ramp ahead of the ego that must merge too.
+    right_lane = tuple(
+        _user(f"main_{k}", "car", RouteSpec(lane=1), s0, _mobil(main_speed))
+        for k, s0 in enumerate((draw(8.0, 0.0, 15.0), draw(75.0, 60.0, 90.0), draw(120.0, 105.0, 135.0)))
+    )
+    left_lane = _user("fast_left", "car", RouteSpec(lane=2), draw(40.0, 20.0, 60.0), _mobil(main_speed + 4.0))
+    ramp = _user("ramp_car", "car", RouteSpec(lane=0), draw(45.0, 35.0, 55.0), _mobil(draw(16.0, 14.0, 18.0)))
+    return Scenario(
+        name="on_ramp_merge",
+        description="on-ramp: the ego merges from the acceleration lane into a gap between reactive cars",
+        road=RoadSpec(
+            kind="merge",
+            length=420.0,
+            lanes=3,
+            speed_limit=25.0,
+            lane_drop=220.0,
+            taper=60.0,
+            boundary="kerb",
+        ),
+        ego=EgoSpec(lane=0, s0=10.0, speed=draw(15.0, 12.0, 17.0), goal_s=380.0, desired_speed=22.0),
+        road_users=(*right_lane, left_lane, ramp),
+        duration=25.0,
+        expect=ExpectSpec(ego_collision=False, reach_goal=True),
+    )
+
+
+def _cut_in(name: str, ego_reaction: str, rng: np.random.Generator | None) -> Scenario:
+    """A MOBIL car in the right lane catches up with a slow truck and changes into the ego's lane."""
+    draw = _Draw(rng)
+    ego_speed = draw(22.0, 20.0, 25.0)
+    cutter = _user(
+        "cutter",
+        "car",
+        RouteSpec(lane=0),
+        draw(30.0, 25.0, 40.0),
+        _mobil(draw(21.0, 19.0, 23.0), ego_reaction),
+    )
+    truck = _user("truck", "truck", RouteSpec(lane=0), draw(75.0, 65.0, 90.0), _idm(draw(12.0, 10.0, 14.0)))
+    reacts = "sees the ego and waits for a safe gap" if ego_reaction == "idm" else "is blind to the ego"
+    return Scenario(
+        name=name,
+        description=f"a reactive car pulls out of the right lane in front of the ego; it {reacts}",
+        road=RoadSpec(length=500.0, lanes=2, speed_limit=25.0, boundary="wall"),
+        ego=EgoSpec(lane=1, s0=10.0, speed=ego_speed, goal_s=460.0),
+        road_users=(cutter, truck),
+        duration=25.0,
+        expect=ExpectSpec(ego_collision=False),
+    )
+
+
+def cut_in_reactive(rng: np.random.Generator | None = None) -> Scenario:
+    """A MOBIL car pulls into the ego's lane ahead of a slow truck; it sees the ego and waits for a gap."""
+    return _cut_in("cut_in_reactive", "idm", rng)
+
+
+def cut_in_blind(rng: np.random.Generator | None = None) -> Scenario:
+    """cut_in_reactive with a driver blind to the ego (ego_reaction = none): it pulls out regardless."""
+    return _cut_in("cut_in_blind", "none", rng)
+
+
 @dataclass(frozen=True, slots=True)
 class ScenarioFamily:
     """A named scenario family.
@@ -785,6 +856,9 @@ _FAMILIES = (
     stopped_car_behind_curve,
     red_light_for_ego,
     scrape_wall_for_child,
+    on_ramp_merge,
+    cut_in_reactive,
+    cut_in_blind,
 )
 
 #: Name -> family, in catalog order.

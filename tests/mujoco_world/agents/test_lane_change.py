@@ -1,9 +1,11 @@
 """MOBIL lane changes: decisions against hand-computed IDM accelerations, keep-right, the ego."""
 
 import math
+import re
 
 import numpy as np
 import pytest
+import shapely
 
 from mujoco_world.agents.lane_change import (
     IdmParameters,
@@ -13,7 +15,8 @@ from mujoco_world.agents.lane_change import (
     mobil_step,
 )
 from mujoco_world.loop.world import World
-from mujoco_world.scenario.spec import scenario_from_dict
+from mujoco_world.scenario.road import box_footprint, build_road
+from mujoco_world.scenario.spec import RoadSpec, scenario_from_dict
 
 W = 3.5  # lane width [m]
 # IDM defaults (IdmSpec): a = 1.5, b = 2, T = 1.5 s, s0 = 2 m; every body wants 30 m/s.
@@ -221,3 +224,121 @@ def test_ego_reaction_idm_stops_behind_the_standing_ego_none_runs_into_it(reacti
         assert 1.5 < gap < 4.0  # about the standstill gap s0 = 2 m
     else:
         assert [(m.a.entity, m.b.entity) for m in hits] == [(0, 1)]
+
+
+def _user(behaviour, route=None):
+    return {"name": "u", "type": "car", "s0": 50.0, "route": route or {"lane": 0}, "behaviour": behaviour}
+
+
+@pytest.mark.parametrize(
+    ("road", "user", "message"),
+    [
+        (
+            {},
+            _user({"kind": "scripted", "mobil": {}}),
+            "behaviour.mobil (lane changes) is only allowed with kind 'idm'",
+        ),
+        (
+            {},
+            _user({"kind": "scripted", "ego_reaction": "none"}),
+            "behaviour.ego_reaction is only allowed with kind",
+        ),
+        (
+            {},
+            _user({"kind": "idm", "ego_reaction": "brake"}),
+            "unknown ego reaction 'brake'; allowed: none, idm",
+        ),
+        ({}, _user({"kind": "idm", "mobil": {"politeness": 9.0}}), "mobil.politeness must lie in [-1, 5] -"),
+        ({}, _user({"kind": "idm", "mobil": {"b_safe": 0.1}}), "mobil.b_safe must lie in [0.5, 15] m/s^2"),
+        (
+            {},
+            _user({"kind": "idm", "mobil": {"polite": 0.3}}),
+            "unknown key 'road_users[0].behaviour.mobil.polite'",
+        ),
+        (
+            {},
+            _user({"kind": "idm", "mobil": {}}, {"road": "waypoints", "waypoints": [[0, 0], [90, 0]]}),
+            "road_users[0] (u).behaviour.mobil: lane changes need a route on the main road's lanes",
+        ),
+        (
+            {"kind": "intersection"},
+            _user({"kind": "idm", "mobil": {}}),
+            "lane changes need a straight, curved or merge road, not road.kind = 'intersection'",
+        ),
+        (
+            {"kind": "merge", "lanes": 1},
+            None,
+            "road.lanes of a merge road counts the acceleration lane and the main road's lanes (at least 2)",
+        ),
+        (
+            {"kind": "merge", "lane_drop": 40.0, "taper": 50.0},
+            None,
+            "road.lane_drop (40 m) must lie after road.taper",
+        ),
+        ({"kind": "merge", "taper": 0.5}, None, "road.taper must lie in [1, 1000] m"),
+    ],
+)
+def test_lane_change_and_merge_fields_are_validated_by_name(road, user, message):
+    data = {"name": "t", "road": road, "road_users": [user] if user else []}
+    with pytest.raises(ValueError, match=re.escape(message)):
+        scenario_from_dict(data)
+
+
+def test_an_ego_on_the_acceleration_lane_must_start_before_its_taper():
+    road = {"kind": "merge", "lanes": 3, "lane_drop": 150.0, "taper": 50.0}
+    with pytest.raises(
+        ValueError, match=re.escape("ego.s0 (90 m) on the acceleration lane (ego.lane = 0) must lie")
+    ):
+        scenario_from_dict({"name": "t", "road": road, "ego": {"lane": 0, "s0": 90.0}})
+    scenario_from_dict({"name": "t", "road": road, "ego": {"lane": 1, "s0": 90.0}})  # on the main road: fine
+
+
+def test_merge_road_geometry_taper_lane_end_and_drivable_area():
+    spec = RoadSpec(kind="merge", length=300.0, lanes=3, lane_drop=160.0, taper=40.0, shoulder=0.5)
+    road = build_road(spec)
+    # Cross-sections: full width (3 lanes + 2 shoulders, 11.5 m) before the taper, the
+    # acceleration lane half gone mid-taper, two lanes + shoulders (8 m) after the drop.
+    for x, right in ((50.0, -5.75), (119.9, -5.75), (140.0, -4.0), (160.0, -2.25), (250.0, -2.25)):
+        section = shapely.LineString([(x, -20.0), (x, 20.0)]).intersection(road.drivable_area)
+        assert section.bounds[1] == pytest.approx(right, abs=1e-6) and section.bounds[3] == pytest.approx(
+            5.75
+        )
+    # Area: 300 m x 11.5 m minus the dropped lane after 160 m and the taper's triangle.
+    assert road.drivable_area.area == pytest.approx(300 * 11.5 - 3.5 * 140 - 0.5 * 3.5 * 40)
+    # The kerb follows the taper: a kerb box covers its middle, just outside the area.
+    mid = shapely.Point(140.0, -4.0 - 0.2)
+    assert any(box_footprint(b).distance(mid) < 1e-6 for b in road.static_boxes())
+    # The acceleration lane's outer marking follows the taper and ends at the drop.
+    edge = road.lane_lines()[0]
+    assert edge[-1] == pytest.approx([160.0, -1.75]) and edge[0] == pytest.approx([0.0, -5.25])
+    # The ego's merged reference: lane 0's centre (-3.5) until 10 m past its start, lane 1's (0) at the taper.
+    path = road.merge_route(10.0)
+    d = np.interp([15.0, 40.0, 80.0, 120.0, 200.0], path[:, 0], path[:, 1])
+    assert d == pytest.approx([-3.5, -3.5, -1.75, 0.0, 0.0], abs=1e-9)
+
+
+def test_a_plain_idm_car_stops_at_the_lane_end_a_mobil_car_merges():
+    def world(behaviour):
+        scenario = scenario_from_dict(
+            {
+                "name": "m",
+                "road": {"kind": "merge", "lanes": 2, "length": 300.0, "lane_drop": 150.0, "taper": 30.0},
+                "ego": {"lane": 1, "s0": 5.0, "speed": 0.0, "goal_s": 280.0},
+                "road_users": [
+                    {"name": "r", "type": "car", "s0": 20.0, "route": {"lane": 0}, "behaviour": behaviour}
+                ],
+            }
+        )
+        w = World(scenario)
+        hits = []
+        while w.time < 15.0:
+            hits += w.step()
+        return w, hits
+
+    plain, hits = world({"kind": "idm", "speed": 15.0})
+    assert hits == [] and plain.fleet.v[0] < 0.3
+    # It stands before the lane's end (the taper's start, 120 m) with its front.
+    assert 110.0 < plain.fleet.s[0] + 2.25 <= 120.0
+    merging, hits = world({"kind": "idm", "speed": 15.0, "mobil": {}})
+    assert hits == [] and merging.fleet.d[0] == pytest.approx(3.5)
+    assert [(a, b) for _, _, a, b in merging.fleet.lane_changes] == [(0, 1)]
