@@ -26,7 +26,7 @@ from ethical_planner.geometry import rectangle_half_extent
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.registry import Registry
 from ethical_planner.road_users import LegalCorridor, RoadUserType
-from mujoco_world.agents.lane_change import (
+from mujoco_world.agents.mobil import (
     LOOK_BACK_M,
     SIDES,
     IdmParameters,
@@ -794,9 +794,9 @@ def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.n
     """MOBIL for the road users ``rows`` (m,): start the lane changes it decides, return their leaders.
 
     Leaders and followers are read in the lanes the road user occupies and in those on
-    either side (``lane_change.lane_neighbours``: the ego is a body like any other,
+    either side (``mobil.lane_neighbours``: the ego is a body like any other,
     unless the road user is blind to it); a road user that is not changing lane and
-    whose cooldown is over changes if MOBIL says so (``lane_change.mobil_step``), with
+    whose cooldown is over changes if MOBIL says so (``mobil.mobil_step``), with
     the scripts' smooth lateral move over ``mobil.duration``. Its IDM leader is the
     nearest one in any lane its footprint occupies: during a change the old and the
     target lane's, after it the target lane's.

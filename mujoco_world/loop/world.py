@@ -25,7 +25,7 @@ from ethical_planner.reference_path import ReferencePath
 from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
 from ethical_planner.validation import check_non_negative, parse_enum
 from mujoco_world.agents.behaviour import Fleet, WorldView
-from mujoco_world.agents.lane_change import lane_layout
+from mujoco_world.agents.mobil import lane_layout
 from mujoco_world.physics.control import (
     GRAVITY,
     ControlConfig,

@@ -490,7 +490,7 @@ class MobilSpec:
 
     At each behaviour tick a road user not already changing lane weighs a change to
     each neighbouring lane of its own direction, with IDM accelerations computed in
-    the current and the target lane (``agents.lane_change``):
+    the current and the target lane (``agents.mobil``):
     ``(a~_c - a_c) + politeness ((a~_n - a_n) + (a~_o - a_o)) +- bias_right > threshold``
     (``+`` for a change to the right, ``-`` to the left: European keep-right rule), and
     changes if also the new follower and itself stay above ``-b_safe`` (safety).

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import shapely
 
-from mujoco_world.agents.lane_change import (
+from mujoco_world.agents.mobil import (
     IdmParameters,
     idm_acceleration,
     lane_layout,
