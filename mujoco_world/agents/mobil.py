@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ethical_planner.geometry import rectangle_half_extent
-from mujoco_world.scenario.spec import RoadKind, RoadName, Scenario
+from mujoco_world.scenario.spec import RoadKind, Scenario
 
 #: Lanes weighed by a decision, relative to the road user's current lane: right, stay, left.
 SIDES = np.array([-1, 0, 1])
@@ -355,28 +355,17 @@ def mobil_step(
 def lane_layout(scenario: Scenario) -> LaneLayout:
     """The lanes of each direction and the lane ends of a scenario's road.
 
-    A merge road is one-way: every lane runs along +x and lane 0 (the acceleration
-    lane) ends at the start of its taper (``road.lane_drop - road.taper``). On other
-    roads, until the road states its lanes per direction, a lane belongs to the
-    direction of the routes that use it (the ego's and every road user's on the main
-    road); with no route against the main road's direction every lane runs with it.
+    The lanes of a direction are ``road.lanes_of(direction)`` (``road.lanes_forward``
+    along the reference direction, the rest against it; a merge road is one way). A
+    merge road's lane 0 (the acceleration lane) ends where its taper starts
+    (``road.lane_drop - road.taper``).
 
     Args:
         scenario: the scenario.
     """
     road = scenario.road
-    lanes = road.lanes
-    ends = [math.inf] * lanes
+    ends = [math.inf] * road.lanes
     if road.kind is RoadKind.MERGE:
         ends[0] = road.lane_drop - road.taper
-        return LaneLayout(road.lane_width, {1: frozenset(range(lanes)), -1: frozenset()}, tuple(ends))
-    main = [u.route for u in scenario.road_users if u.route.road is RoadName.MAIN]
-    used = {1: {scenario.ego.lane}, -1: set()}
-    for route in main:
-        used[route.direction].add(route.lane)
-    if not used[-1]:
-        return LaneLayout(road.lane_width, {1: frozenset(range(lanes)), -1: frozenset()}, tuple(ends))
-    # A lane counted from the right in one direction is lane (lanes - 1 - lane) in the other.
-    forward = used[1] - {lanes - 1 - lane for lane in used[-1]}
-    backward = used[-1] - {lanes - 1 - lane for lane in used[1]}
-    return LaneLayout(road.lane_width, {1: frozenset(forward), -1: frozenset(backward)}, tuple(ends))
+    own = {d: frozenset(range(road.lanes_of(d))) for d in (1, -1)}
+    return LaneLayout(road.lane_width, own, tuple(ends))

@@ -807,7 +807,7 @@ def _cut_in(name: str, ego_reaction: str, rng: np.random.Generator | None) -> Sc
     return Scenario(
         name=name,
         description=f"a reactive car pulls out of the right lane in front of the ego; it {reacts}",
-        road=RoadSpec(length=500.0, lanes=2, speed_limit=25.0, boundary="wall"),
+        road=RoadSpec(length=500.0, lanes=2, lanes_forward=2, speed_limit=25.0, boundary="wall"),
         ego=EgoSpec(lane=1, s0=10.0, speed=ego_speed, goal_s=460.0),
         road_users=(cutter, truck),
         duration=25.0,

@@ -193,7 +193,9 @@ class RoadGeometry:
 
         The outer lane edges (between lanes and shoulder) and the centre line between
         the two directions are solid, the lines between lanes of one direction dashed
-        (``DASH_M`` painted, ``GAP_M`` free). A map road has none (its lanes are not
+        (``DASH_M`` painted, ``GAP_M`` free). A merge road's acceleration lane has its
+        outer edge along the taper up to ``lane_drop`` and a dashed line to the main
+        road up to there. A map road has none (its lanes are not
         numbered).
         """
         spec = self.spec
@@ -208,7 +210,17 @@ class RoadGeometry:
                 continue
             for i, d in enumerate(edges):
                 marking = offset_polyline(line, float(d))
-                if i in (0, spec.lanes) or (i == centre and self.centre_offset is not None):
+                if spec.kind is RoadKind.MERGE and i < 2:
+                    # The acceleration lane: its outer edge follows the taper to the lane
+                    # drop; the line to the main road is dashed up to there, the road's edge after.
+                    x = line[:, 0]
+                    before = x <= spec.lane_drop
+                    if i == 0:
+                        solid.append(np.column_stack([x[before], _merge_edge(spec, x[before], shoulder=0.0)]))
+                    else:
+                        dashed.extend(dashes(marking[before], DASH_M, GAP_M))
+                        solid.append(marking[x >= spec.lane_drop])
+                elif i in (0, spec.lanes) or (i == centre and self.centre_offset is not None):
                     solid.append(marking)
                 else:
                     dashed.extend(dashes(marking, DASH_M, GAP_M))
@@ -261,25 +273,6 @@ class RoadGeometry:
         exit_ = np.array([point(exit_road, u, d_out) for u in u_out])
         bend = _bezier(entry[-1], heading_in, exit_[0], heading_out)
         return _dedupe(np.concatenate([entry, bend[1:-1], exit_]))
-
-    def lane_lines(self) -> tuple[np.ndarray, ...]:
-        """Lane markings [m]: the edges of every lane of the main (and cross) road, each (k, 2).
-
-        On a merge road the acceleration lane's outer edge follows its taper and ends
-        at ``lane_drop``.
-        """
-        spec = self.spec
-        lines = []
-        for line in (self.main_line, self.cross_line):
-            if line is None:
-                continue
-            for i in range(spec.lanes + 1):
-                lines.append(offset_polyline(line, -spec.half_width + i * spec.lane_width))
-        if spec.kind is RoadKind.MERGE:
-            x = self.main_line[:, 0]
-            keep = x <= spec.lane_drop
-            lines[0] = np.column_stack([x[keep], _merge_edge(spec, x[keep], shoulder=0.0)])
-        return tuple(lines)
 
     def merge_route(self, s_start: float) -> np.ndarray:
         """The route from the acceleration lane into the main road's right lane [m], (n, 2).

@@ -310,6 +310,14 @@ class RoadSpec:
             f"road.lanes must be an integer in 1..8, got {self.lanes!r}",
         )
         forward = self.lanes_forward if self.lanes_forward is not None else (self.lanes + 1) // 2
+        if self.kind is RoadKind.MERGE:
+            # A merge road is one way: every lane runs along the reference direction.
+            forward = self.lanes if self.lanes_forward is None else self.lanes_forward
+            check(
+                forward == self.lanes,
+                f"road.lanes_forward of a merge road must be road.lanes ({self.lanes}: it is one way), "
+                f"got {forward!r}",
+            )
         check(
             isinstance(forward, int) and not isinstance(forward, bool) and 0 <= forward <= self.lanes,
             f"road.lanes_forward must be an integer in 0..road.lanes ({self.lanes}), got {forward!r}",
@@ -1672,6 +1680,10 @@ class Scenario:
                 user.route.road is RoadName.MAIN,
                 f"{where}: lane changes need a route on the main road's lanes, not route.road = "
                 f"{user.route.road.value!r}",
+            )
+            check(
+                not user.route.wrong_way,
+                f"{where}: a wrong-way driver (route.wrong_way) does not change lanes by MOBIL",
             )
 
 

@@ -126,16 +126,11 @@ def test_the_ego_counts_as_new_follower_unless_the_road_user_is_blind_to_it():
 
 
 def test_lane_layout_directions_and_the_merge_lane_end():
-    one_way = scenario_from_dict({"name": "t", "road": {"lanes": 3}, "ego": {"lane": 1}})
+    one_way = scenario_from_dict({"name": "t", "road": {"lanes": 3, "lanes_forward": 3}, "ego": {"lane": 1}})
     assert lane_layout(one_way).own_lanes == {1: frozenset({0, 1, 2}), -1: frozenset()}
-    two_way = scenario_from_dict(
-        {
-            "name": "t",
-            "road": {"lanes": 2},
-            "road_users": [{"name": "o", "type": "car", "s0": 100.0, "route": {"lane": 0, "direction": -1}}],
-        }
-    )
-    layout = lane_layout(two_way)
+    layout = lane_layout(scenario_from_dict({"name": "t", "road": {"lanes": 4}}))
+    assert layout.own_lanes == {1: frozenset({0, 1}), -1: frozenset({0, 1})}
+    layout = lane_layout(scenario_from_dict({"name": "t", "road": {"lanes": 2}}))
     assert layout.own_lanes == {1: frozenset({0}), -1: frozenset({0})}
     assert not layout.allowed(np.array([1]), np.array([1]))[0]  # the oncoming lane is not its own
     merge = scenario_from_dict(
@@ -152,7 +147,13 @@ def _overtake_world(**fast):
     scenario = scenario_from_dict(
         {
             "name": "overtake",
-            "road": {"length": 600.0, "lanes": 2, "speed_limit": 30.0, "boundary": "wall"},
+            "road": {
+                "length": 600.0,
+                "lanes": 2,
+                "lanes_forward": 2,
+                "speed_limit": 30.0,
+                "boundary": "wall",
+            },
             "ego": {"s0": 5.0, "speed": 0.0, "lane": 0, "goal_s": 560.0},
             "road_users": [
                 {
@@ -276,6 +277,11 @@ def _user(behaviour, route=None):
             "road.lane_drop (40 m) must lie after road.taper",
         ),
         ({"kind": "merge", "taper": 0.5}, None, "road.taper must lie in [1, 1000] m"),
+        (
+            {"kind": "merge", "lanes": 3, "lanes_forward": 2},
+            None,
+            "road.lanes_forward of a merge road must be",
+        ),
     ],
 )
 def test_lane_change_and_merge_fields_are_validated_by_name(road, user, message):
@@ -308,9 +314,15 @@ def test_merge_road_geometry_taper_lane_end_and_drivable_area():
     # The kerb follows the taper: a kerb box covers its middle, just outside the area.
     mid = shapely.Point(140.0, -4.0 - 0.2)
     assert any(box_footprint(b).distance(mid) < 1e-6 for b in road.static_boxes())
-    # The acceleration lane's outer marking follows the taper and ends at the drop.
-    edge = road.lane_lines()[0]
+    # The acceleration lane's outer marking follows the taper and ends at the drop; the
+    # line to the main road is dashed up to the drop and the road's solid edge after it.
+    markings = road.lane_markings()
+    edge = markings.solid[0]
     assert edge[-1] == pytest.approx([160.0, -1.75]) and edge[0] == pytest.approx([0.0, -5.25])
+    assert max(d[:, 0].max() for d in markings.dashed if d[0, 1] == pytest.approx(-1.75)) <= 160.0
+    assert any(
+        s[0] == pytest.approx([160.0, -1.75]) and s[-1, 0] == pytest.approx(300.0) for s in markings.solid
+    )
     # The ego's merged reference: lane 0's centre (-3.5) until 10 m past its start, lane 1's (0) at the taper.
     path = road.merge_route(10.0)
     d = np.interp([15.0, 40.0, 80.0, 120.0, 200.0], path[:, 0], path[:, 1])
