@@ -10,11 +10,12 @@ For every vehicle impact of an ``etp impacts`` table whose sequence is flagged
   (``tests/mujoco_world/physics/rigid_reference.py``, no MuJoCo; pure Python, about a
   minute per sequence) integrated over the whole sequence of the *free* bodies, until they
   have been apart for 0.3 s;
-* the planar impulse model (first contact only) and paper Eq. 1.
+* the planar impulse model (first contact only), the planar sequence model (every hit,
+  bodies skidding between them as in the sweep; ``harm_calibration.sequence``, read from
+  the table, "-" for a table without it) and paper Eq. 1.
 
-Free bodies (coasting) are the ideal of a sequence-aware planar model: impulse, free
-motion with the post-impact velocities and spin, a re-check for a second contact, its
-impulse, and so on. What the skidding adds between hits is beyond such a model.
+Coasting bodies show what the tyre forces between hits change: the sequence model takes
+them (``ethical_planner.impulse.SkidModel``).
 
 Run: python benchmarks/impact_sequences.py logs/small_rigid/impacts.csv [--reference]
 """
@@ -85,7 +86,16 @@ def main() -> None:
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     nan = float("nan")
     err: dict[str, list[float]] = {
-        k: [] for k in ("planar", "eq1", "coasting", "first_coasting", "reference", "reference_coasting")
+        k: []
+        for k in (
+            "planar",
+            "sequence",
+            "eq1",
+            "coasting",
+            "first_coasting",
+            "reference",
+            "reference_coasting",
+        )
     }
     for r in rows:
         case = ImpactCase(r["partner"], r["closing_speed"], r["angle_deg"], r["offset"], r["restitution_set"])
@@ -100,6 +110,7 @@ def main() -> None:
         ref = _reference_dv(reference, case, m) if args.reference else nan
         measured = r["dv_measured_a"]
         err["planar"].append((measured - r["dv_planar_a"]) / r["dv_planar_a"])
+        err["sequence"].append((measured - r["dv_planar_seq_a"]) / r["dv_planar_seq_a"])
         err["eq1"].append((measured - r["dv_predicted_a"]) / r["dv_predicted_a"])
         err["reference"].append((measured - ref) / ref)
         err["reference_coasting"].append((m.a.dv_impulse - ref) / ref)
@@ -112,6 +123,7 @@ def main() -> None:
     print()
     print(f"{len(err['planar'])} multi-impact vehicle sequences; |measured sequence - model| / model:")
     print(f"- planar model (first contact): {_stats(err['planar'])}")
+    print(f"- planar sequence model (every hit, skidding): {_stats(err['sequence'])}")
     print(f"- Eq. 1: {_stats(err['eq1'])}")
     print(f"- the same sequence measured with coasting bodies: {_stats(err['coasting'])}")
     print(f"- free rigid bodies (reference): {_stats(err['reference'])}")
