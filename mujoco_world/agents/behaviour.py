@@ -14,6 +14,7 @@ lag their references slightly and respond to impacts.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from collections.abc import Sequence
@@ -790,6 +791,14 @@ def _leaders(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarra
     return best, speed
 
 
+@functools.lru_cache(maxsize=16)
+def _followers(types: tuple[RoadUserType, ...]) -> np.ndarray:
+    """(n,) bool: bodies that can be a MOBIL follower (every road user but pedestrians)."""
+    mask = np.array([ty is not RoadUserType.PEDESTRIAN for ty in types], dtype=bool)
+    mask.setflags(write=False)
+    return mask
+
+
 def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarray, np.ndarray]:
     """MOBIL for the road users ``rows`` (m,): start the lane changes it decides, return their leaders.
 
@@ -816,7 +825,7 @@ def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.n
     n = view.position.shape[0]
     sees = np.ones((m, n), dtype=bool)
     sees[:, 0] = ~fleet.blind_to_ego[rows]
-    can_follow = np.array([ty is not RoadUserType.PEDESTRIAN for ty in view.types])
+    can_follow = _followers(view.types)
     current = np.rint(fleet.d[rows] / w).astype(np.int64)
     lane = fleet.route_lane[rows, None] + current[:, None] + SIDES[None, :]
     direction = fleet.direction[rows, None]

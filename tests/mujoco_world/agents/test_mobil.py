@@ -15,6 +15,7 @@ from mujoco_world.agents.mobil import (
     mobil_step,
 )
 from mujoco_world.loop.world import World
+from mujoco_world.scenario.catalog import get_scenario
 from mujoco_world.scenario.road import box_footprint, build_road
 from mujoco_world.scenario.spec import RoadSpec, scenario_from_dict
 
@@ -217,7 +218,7 @@ def _standing_ego_world(reaction):
 def test_ego_reaction_idm_stops_behind_the_standing_ego_none_runs_into_it(reaction):
     world = _standing_ego_world(reaction)
     hits = []
-    while world.time < 12.0:
+    while world.time < 12.0 and not hits:
         hits += world.step()
     if reaction == "idm":
         assert hits == [] and world.fleet.v[0] < 0.3
@@ -327,6 +328,14 @@ def test_merge_road_geometry_taper_lane_end_and_drivable_area():
     path = road.merge_route(10.0)
     d = np.interp([15.0, 40.0, 80.0, 120.0, 200.0], path[:, 0], path[:, 1])
     assert d == pytest.approx([-3.5, -3.5, -1.75, 0.0, 0.0], abs=1e-9)
+
+
+def test_an_ego_on_the_ramp_plans_along_the_merged_reference():
+    world = World(get_scenario("on_ramp_merge"))  # lane_drop 220 m, taper 60 m, lanes 3
+    x, y, *_ = world.ego_path.evaluate(np.array([10.0, 60.0, 160.0, 300.0]))
+    assert y == pytest.approx([-3.5, -3.5, 0.0, 0.0], abs=0.05)  # lane 0's centre, then lane 1's
+    env = world.environment()
+    assert env.lane_offsets == pytest.approx((-3.5, 0.0, 3.5))  # relative to the merged reference
 
 
 def test_a_plain_idm_car_stops_at_the_lane_end_a_mobil_car_merges():
