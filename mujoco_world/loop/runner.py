@@ -265,8 +265,8 @@ class ClosedLoop:
         run, world = self.run, self.world
         # Plans drive the ego while it is on them (``World.ego_on_plan``: before its first
         # contact, and after it under the ``continue`` policy, replanned at once from
-        # the measured state when the ego comes out of an impact pulse).
-        if world.ego_on_plan and (run.step % self.steps_per_cycle == 0 or world.ego_left_pulse):
+        # the measured state when the ego comes out of an impact).
+        if world.ego_on_plan and (run.step % self.steps_per_cycle == 0 or world.ego_left_impact):
             self._plan()
         ended = world.step()
         run.step += 1

@@ -114,9 +114,12 @@ class World:
         post_crash: what the ego's controller does after its first contact
             (``PostCrashPolicy``); None is the scenario's ``ego.post_crash``.
 
-    Controllers after contact: inside an impact pulse (``ImpactRecorder.in_pulse``) a
-    body's controller force is zero, so the measured delta-v is the contact's alone.
-    Outside pulses a road user that has touched something brakes to rest
+    Controllers after contact: inside an impact (``ImpactRecorder.in_impact``: a contact
+    force above ``MeasurementWindow.impact_acceleration`` times the body's mass within
+    the last ``impact_hold``) a body's controller force is zero. A scrape or a body pressed
+    against a wall (forces of the order of the tyre force) does not cut it. The measured
+    delta-v integrates contact forces only, so it is the contact's alone either way.
+    Outside impacts a road user that has touched something brakes to rest
     (``brake_forces``: it is out of the traffic); the ego brakes too under the
     ``brake`` policy, or keeps tracking the planner's plans under ``continue``
     (``ego_on_plan``).
@@ -277,8 +280,8 @@ class World:
             pk,
         )
         self.crashed = np.zeros(self.n, dtype=bool)
-        #: True after a step in which the ego came out of an impact pulse (the loop replans then).
-        self.ego_left_pulse = False
+        #: True after a step in which the ego came out of an impact (the loop replans then).
+        self.ego_left_impact = False
         #: Pose (x, y, yaw) where each body last left the world, (n, 3) (nan if it never left).
         self.exit_pose = np.full((self.n, 3), math.nan)
         self.ego_crash_time: float | None = None
@@ -662,7 +665,7 @@ class World:
         """True while the ego's controller tracks the planner's plans.
 
         Before the ego's first contact, and after it under the ``continue`` policy
-        (outside impact pulses the plan is tracked, inside them the force is zero).
+        (outside impacts the plan is tracked, inside them the force is zero).
         """
         return bool(self.present[0]) and (not self.crashed[0] or self.post_crash is PostCrashPolicy.CONTINUE)
 
@@ -721,9 +724,10 @@ class World:
                 ctrl[rows] = brake_forces(
                     self.control, scene.masses[rows], scene.yaw_inertia[rows], scene.qvel[rows]
                 )
-            # No controller force inside an impact pulse (a body in one has touched
-            # something, so it is crashed): it would contaminate the measured delta-v.
-            ctrl[self.recorder.in_pulse] = 0.0
+            # No controller force inside an impact (a body in one has touched something,
+            # so it is crashed): a driver or automation has no control in a pulse of tens
+            # of g. Scraping or pressed against a wall, it keeps braking and steering.
+            ctrl[self.recorder.in_impact] = 0.0
         if not self.present.all():
             ctrl[~self.present] = 0.0
         scene.ctrl[:] = ctrl
@@ -802,8 +806,8 @@ class World:
         """One physics step: behaviours, controllers, ``mj_step``, impact measurement.
 
         Controls are recomputed every ``control_interval`` steps (held in between),
-        and every step once a body has crashed. ``ego_left_pulse`` says whether the ego
-        came out of an impact pulse in this step.
+        and every step once a body has crashed. ``ego_left_impact`` says whether the ego
+        came out of an impact in this step.
 
         Returns:
             The collision episodes that ended in this step.
@@ -817,9 +821,9 @@ class World:
         self._control_countdown -= 1
         recorder = self.recorder
         t_physics = clock()
-        was_in_pulse = bool(recorder.in_pulse[0])
+        was_in_impact = bool(recorder.in_impact[0])
         done = scene.step(recorder)  # physics and impact measurement, sub-stepped in impacts
-        self.ego_left_pulse = was_in_pulse and not recorder.in_pulse[0]
+        self.ego_left_impact = was_in_impact and not recorder.in_impact[0]
         self._steps += 1
         if self._steps % self._history_interval == 0:
             self._sample_history()

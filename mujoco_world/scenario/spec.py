@@ -176,9 +176,11 @@ class Boundary(StrEnum):
 class PostCrashPolicy(StrEnum):
     """What the ego's controller does after its first contact (``[ego] post_crash``).
 
-    Inside an impact pulse (``ImpactRecorder.in_pulse``) every body's controller force is
-    zero under either policy, so a measured delta-v is the contact's alone. Between and
-    after pulses:
+    Inside an impact (``ImpactRecorder.in_impact``: the high-force part of a contact
+    pulse, above ``MeasurementWindow.impact_acceleration`` times the body's mass) every
+    body's controller force is zero under either policy; a scrape or a body pressed
+    against a wall keeps its controller. A measured delta-v integrates contact forces
+    only, so it is the contact's alone. Outside impacts:
 
     ``brake``: the ego stops following plans and brakes to rest at up to mu g, as a
     multi-collision brake does (the default: it keeps the catalog's outcomes as they
