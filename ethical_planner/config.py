@@ -539,6 +539,21 @@ class TrafficRulesConfig:
             is judged [s]: the world's ego does not cross exactly when planned (a
             random red_light_for_ego variant planned to cross 0.0 s after the green
             and crossed 13 ms before it, a violation). 0.5 s at 8 m/s is 4 m.
+        no_overtaking: keep the road's no-overtaking zones (``RoadEnvironment.
+            no_overtaking``): a candidate whose footprint moves further across the
+            centre line in a zone is level 4, unless something slower than the zone's
+            ``pass_below`` blocks the ego's lane within ``pass_lookahead``.
+        shoulder: keep off the shoulders (``RoadEnvironment.lane_edges``): a candidate
+            whose footprint moves further beyond an outer lane edge is level 4. The
+            validity hierarchy lets a shoulder plan win when every plan in the lanes is
+            invalid or above R_max (to avoid a crash).
+        pass_lookahead: how far ahead of the ego's front a slow obstacle releases a
+            no-overtaking zone [m].
+        marking_margin: the planner keeps this far inside the centre line and the
+            outer lane edges [m] (the world's judge tolerates 0.1 m; the executed path
+            strays from the plan by a few centimetres).
+        zone_margin: each no-overtaking zone is lengthened by this much at both ends
+            [m] (the plan is judged at its samples; the executed path lags it).
     """
 
     enabled: bool = True
@@ -546,10 +561,20 @@ class TrafficRulesConfig:
     stop_gap: float = 1.0
     min_deceleration: float = 0.5
     red_margin: float = 0.5
+    no_overtaking: bool = True
+    shoulder: bool = True
+    pass_lookahead: float = 40.0
+    marking_margin: float = 0.05
+    zone_margin: float = 2.0
 
     def __post_init__(self) -> None:
         enabled = self.enabled
         check(isinstance(enabled, bool), f"traffic_rules.enabled must be true or false, got {enabled!r}")
+        for name in ("no_overtaking", "shoulder"):
+            value = getattr(self, name)
+            check(isinstance(value, bool), f"traffic_rules.{name} must be true or false, got {value!r}")
+        check_positive("traffic_rules", pass_lookahead=self.pass_lookahead)
+        check_non_negative("traffic_rules", marking_margin=self.marking_margin, zone_margin=self.zone_margin)
         check_positive(
             "traffic_rules",
             comfortable_deceleration=self.comfortable_deceleration,

@@ -39,6 +39,38 @@ class StopLine:
         return any(a <= time < b for a, b in self.red)
 
 
+@dataclass(frozen=True, slots=True)
+class NoOvertakingZone:
+    """A stretch of the reference path in which the ego keeps out of the oncoming lanes.
+
+    Environment data for the planner (the scenario's ``[[road.no_overtaking]]``); the
+    world judges the ego itself. A candidate whose footprint moves further across the
+    centre line (``RoadEnvironment.centre_line``) while any part of it lies in the
+    zone breaks the rule (``ethical_planner.traffic_rules.breaks_lane_rules``), unless
+    the ego's lane ahead is blocked by something slower than ``pass_below``: passing a
+    standing obstacle, or a road user crawling along, is not overtaking (the UK Highway
+    Code, rule 129, allows crossing a solid centre line to pass a stationary vehicle or
+    a cyclist, horse or road works vehicle at 10 mph or less).
+
+    Attributes:
+        start, end: arc lengths along the reference path [m], start < end.
+        pass_below: road users slower than this may be passed, and debris [m/s]; 0 allows
+            no exception (the ego then waits behind debris in the zone).
+    """
+
+    start: float
+    end: float
+    pass_below: float = 4.47
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.start) and math.isfinite(self.end) and self.start < self.end):
+            raise ValueError(
+                f"a no-overtaking zone needs finite start < end [m], got {self.start}, {self.end}"
+            )
+        if not (math.isfinite(self.pass_below) and self.pass_below >= 0.0):
+            raise ValueError(f"no-overtaking pass_below must be >= 0 m/s, got {self.pass_below}")
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class RoadEnvironment:
     """Road geometry around the ego's route.
@@ -51,6 +83,13 @@ class RoadEnvironment:
         lane_offsets: lateral offsets d of the lane centres from the reference path [m].
         speed_limit: [m/s].
         stop_lines: traffic lights and stop signs on the reference path, by arc length.
+        centre_line: offset d of the line between the ego's lanes and the oncoming
+            lanes (left of it) from the reference path [m]; None on a one-way road or a
+            road without lane markings.
+        lane_edges: offsets d (right, left) of the outer lane edges from the reference
+            path [m]; the drivable strips beyond them are the shoulders (and parking
+            strips), drivable but not lanes. None: no markings, no shoulder rule.
+        no_overtaking: the no-overtaking zones (they need a centre line).
     """
 
     reference_path: ReferencePath
@@ -59,6 +98,9 @@ class RoadEnvironment:
     lane_offsets: tuple[float, ...] = (0.0,)
     speed_limit: float = 13.9
     stop_lines: tuple[StopLine, ...] = ()
+    centre_line: float | None = None
+    lane_edges: tuple[float, float] | None = None
+    no_overtaking: tuple[NoOvertakingZone, ...] = ()
     _prepared: bool = field(default=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -73,6 +115,18 @@ class RoadEnvironment:
         if not (math.isfinite(self.speed_limit) and self.speed_limit > 0):
             raise ValueError(f"speed_limit must be > 0 m/s, got {self.speed_limit}")
         object.__setattr__(self, "lane_offsets", tuple(float(d) for d in self.lane_offsets))
+        if self.centre_line is not None and not math.isfinite(self.centre_line):
+            raise ValueError(f"centre_line must be a finite offset [m] or None, got {self.centre_line}")
+        if self.lane_edges is not None:
+            right, left = (float(d) for d in self.lane_edges)
+            if not (math.isfinite(right) and math.isfinite(left) and right < left):
+                raise ValueError(
+                    f"lane_edges must be finite offsets (right, left), right < left, got {self.lane_edges}"
+                )
+            object.__setattr__(self, "lane_edges", (right, left))
+        object.__setattr__(self, "no_overtaking", tuple(self.no_overtaking))
+        if self.no_overtaking and self.centre_line is None:
+            raise ValueError("no_overtaking zones need a centre_line (a road with lanes in both directions)")
         shapely.prepare(self.drivable_area)
 
     @classmethod

@@ -40,7 +40,14 @@ from ethical_planner.sampling import (
     sample_candidates,
 )
 from ethical_planner.terminal import crowds_static_obstacle, terminally_unsafe
-from ethical_planner.traffic_rules import StopLines, breaks_stop_lines, stood_at, stop_targets
+from ethical_planner.traffic_rules import (
+    LaneRules,
+    StopLines,
+    breaks_lane_rules,
+    breaks_stop_lines,
+    stood_at,
+    stop_targets,
+)
 from ethical_planner.validity import Validity, physically_invalid, validity_levels
 from ethical_planner.workers import Workers
 
@@ -336,6 +343,7 @@ class Planner:
         corridors: LegalCorridors,
         timings: dict[str, float],
         lines: StopLines | None = None,
+        lane_rules: LaneRules | None = None,
     ) -> _Evaluation:
         config = self.config
         clock = _clock()
@@ -380,7 +388,7 @@ class Planner:
             candidates, on_road, self.environment, self.ego_shape, config.terminal
         )
         max_risk = config.risk.max_acceptable_risk
-        breaks = self._breaks_rules(candidates, lines)
+        breaks = self._breaks_rules(candidates, lines, lane_rules)
         zero_risk = np.zeros((n, k)), np.zeros(n)
         possible = _rule_levels(
             validity_levels(invalid, collision[:, None, None], outside, *zero_risk, max_risk), breaks
@@ -439,18 +447,25 @@ class Planner:
             candidates, risk, r_obs, r_ego, levels, invalid, costs, risk_obs, ego_combined, terminal
         )
 
-    def _breaks_rules(self, candidates: Candidates, lines: StopLines | None) -> np.ndarray:
-        """Candidates that cross a binding stop line, shape (n,) (``traffic_rules``)."""
-        if lines is None:
-            return np.zeros(candidates.n_traj, dtype=bool)
-        return breaks_stop_lines(
-            candidates.s + 0.5 * self.ego_shape.length,
-            candidates.s_dot[:, -1],
-            candidates.t,
-            lines,
-            self.config.traffic_rules.comfortable_deceleration,
-            candidates.deceleration,
-        )
+    def _breaks_rules(
+        self, candidates: Candidates, lines: StopLines | None, lane_rules: LaneRules | None = None
+    ) -> np.ndarray:
+        """Candidates that cross a binding stop line or marking, shape (n,) (``traffic_rules``)."""
+        breaks = np.zeros(candidates.n_traj, dtype=bool)
+        if lines is not None:
+            breaks |= breaks_stop_lines(
+                candidates.s + 0.5 * self.ego_shape.length,
+                candidates.s_dot[:, -1],
+                candidates.t,
+                lines,
+                self.config.traffic_rules.comfortable_deceleration,
+                candidates.deceleration,
+            )
+        if lane_rules is not None:
+            breaks |= breaks_lane_rules(
+                candidates, self.environment.reference_path, self.ego_shape, lane_rules
+            )
+        return breaks
 
     def _stop_lines(self, start: FrenetState, speed: float, now: float) -> StopLines | None:
         """This cycle's stop lines, after noting a standstill at a stop sign; None without any."""
@@ -572,14 +587,19 @@ class Planner:
         corridors = LegalCorridors.of(road_users, self.environment)
         timings["prediction"] = _since(clock)
 
-        grid = self._evaluate(candidates, prediction, corridors, timings, lines)
+        lane_rules = (
+            LaneRules.of(self.environment, start, self.ego_shape.length, prediction, rules)
+            if rules.enabled
+            else None
+        )
+        grid = self._evaluate(candidates, prediction, corridors, timings, lines, lane_rules)
         clock = _clock()
         best_level = int(grid.levels.max())
         chosen = grid
         emergency = False
         if best_level == Validity.PHYSICALLY_INVALID:
             brake = emergency_braking(start, path, candidates.t, config.vehicle)
-            chosen = self._evaluate(brake, prediction, corridors, timings, lines)
+            chosen = self._evaluate(brake, prediction, corridors, timings, lines, lane_rules)
             index, emergency, continued = 0, True, False
             reason = (
                 "emergency braking: every sampled candidate breaks a physical limit ("

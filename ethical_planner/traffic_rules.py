@@ -39,8 +39,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ethical_planner.config import TrafficRulesConfig, VehicleConfig
-from ethical_planner.environment import StopLine
-from ethical_planner.sampling import FrenetState, braking_motion
+from ethical_planner.environment import NoOvertakingZone, RoadEnvironment, StopLine
+from ethical_planner.prediction.base import Prediction
+from ethical_planner.reference_path import ReferencePath
+from ethical_planner.risk import static_obstacles
+from ethical_planner.road_users import Shape
+from ethical_planner.sampling import Candidates, FrenetState, braking_motion
 
 #: Below this speed [m/s] the ego stands still (stop signs; the world's judge uses it too).
 STANDSTILL_MPS = 0.1
@@ -228,3 +232,189 @@ def stood_at(lines: tuple[StopLine, ...], front: float, speed: float) -> np.ndar
 def stop_targets(lines: StopLines, start: FrenetState, front_offset: float, stop_gap: float) -> np.ndarray:
     """Distances the ego's centre travels to stop ``stop_gap`` before each binding line [m]."""
     return lines.s[lines.binding] - stop_gap - front_offset - start.s
+
+
+# --------------------------------------------------------------------------- lane markings
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class LaneRules:
+    """The lane markings that bind the ego in one planning cycle.
+
+    Attributes:
+        centre: offset d of the centre line from the reference path [m], or None if no
+            no-overtaking zone binds this cycle.
+        zones: the binding zones' (start, end) arc lengths [m], shape (z, 2).
+        edges: offsets d (right, left) of the outer lane edges [m], or None if the
+            shoulder rule does not apply.
+    """
+
+    centre: float | None
+    zones: np.ndarray
+    edges: tuple[float, float] | None
+
+    @classmethod
+    def of(
+        cls,
+        environment: RoadEnvironment,
+        start: FrenetState,
+        ego_length: float,
+        prediction: Prediction,
+        rules: TrafficRulesConfig,
+    ) -> LaneRules | None:
+        """The rules of this cycle; None if none applies.
+
+        A zone binds unless something slower than its ``pass_below`` blocks the ego's
+        lane ahead (``lane_blocked``): passing it is not overtaking.
+        """
+        zones = environment.no_overtaking if rules.no_overtaking else ()
+        edges = environment.lane_edges if rules.shoulder else None
+        binding = [
+            z
+            for z in zones
+            if z.end > start.s - ego_length
+            and not _passable(z, environment, start, ego_length, prediction, rules)
+        ]
+        if not binding and edges is None:
+            return None
+        # Margins: the executed path lags and strays from the plan by a few centimetres and
+        # the plan is judged at its samples only (0.6 m apart at 6 m/s).
+        margin = rules.marking_margin
+        centre = environment.centre_line - margin if binding and environment.centre_line is not None else None
+        spans = np.array(
+            [(z.start - rules.zone_margin, z.end + rules.zone_margin) for z in binding], dtype=float
+        )
+        if edges is not None:
+            edges = (edges[0] + margin, edges[1] - margin)
+        return cls(centre, spans.reshape(-1, 2), edges)
+
+
+def _passable(
+    zone: NoOvertakingZone,
+    environment: RoadEnvironment,
+    start: FrenetState,
+    ego_length: float,
+    prediction: Prediction,
+    rules: TrafficRulesConfig,
+) -> bool:
+    """True if the zone's exception holds: something slower than ``pass_below`` blocks the lane."""
+    if zone.pass_below <= 0.0:
+        return False
+    return lane_blocked(
+        environment,
+        (start.s, start.d),
+        ego_length,
+        prediction.mean[:, 0],
+        prediction.speed[:, 0],
+        prediction.width,
+        zone.pass_below,
+        rules.pass_lookahead,
+    )
+
+
+def lane_blocked(
+    environment: RoadEnvironment,
+    ego: tuple[float, float],
+    ego_length: float,
+    positions: np.ndarray,
+    speeds: np.ndarray,
+    widths: np.ndarray,
+    below: float,
+    lookahead: float,
+) -> bool:
+    """True if debris or a road user slower than ``below`` lies in the ego's lane ahead.
+
+    The ego's lane is the lane (``environment.lane_offsets``) nearest to its centre;
+    "ahead" reaches from the ego's rear to ``lookahead`` beyond its front. A road user
+    is in the lane if its footprint's lateral extent (its centre's offset +- half its
+    width) overlaps the lane; debris (a hole of the drivable area) if its outline does.
+    The planner (its prediction's present state) and the world's judge (the true
+    state) both ask this.
+
+    Args:
+        environment: the road (reference path, lanes, drivable area).
+        ego: the ego centre's Frenet (s, d) [m].
+        ego_length: [m].
+        positions: road users' centres [m], shape (k, 2).
+        speeds: their speeds [m/s], shape (k,).
+        widths: their widths [m], shape (k,).
+        below: speed below which a road user blocks [m/s].
+        lookahead: [m].
+    """
+    path = environment.reference_path
+    offsets = np.asarray(environment.lane_offsets, dtype=float)
+    s_ego, d_ego = ego
+    lane = offsets[np.argmin(np.abs(offsets - d_ego))]
+    half_lane = 0.5 * environment.lane_width
+    low, high = s_ego - 0.5 * ego_length, s_ego + 0.5 * ego_length + lookahead
+    positions = np.asarray(positions, dtype=float).reshape(-1, 2)
+    if positions.size:
+        s_k, d_k = path.to_frenet(positions[:, 0], positions[:, 1])
+        reach = 0.5 * np.asarray(widths, dtype=float)
+        slow = np.asarray(speeds, dtype=float) < below
+        ahead = (s_k >= low) & (s_k <= high)
+        inside = ahead & (d_k + reach > lane - half_lane) & (d_k - reach < lane + half_lane)
+        if np.any(slow & inside):
+            return True
+    holes = static_obstacles(environment)
+    if holes is None:
+        return False
+    for hole in getattr(holes, "geoms", (holes,)):  # a few pieces of debris
+        xy = np.asarray(hole.exterior.coords)
+        s_h, d_h = path.to_frenet(xy[:, 0], xy[:, 1])
+        along = s_h.max() >= low and s_h.min() <= high
+        if along and d_h.max() > lane - half_lane and d_h.min() < lane + half_lane:
+            return True
+    return False
+
+
+def lateral_extent(
+    candidates: Candidates, path: ReferencePath, shape: Shape
+) -> tuple[np.ndarray, np.ndarray]:
+    """Right and left edges of the ego's footprint as offsets d from the path [m], shape (n, n_t) each.
+
+    The rectangle at heading ``yaw`` against the path's heading ``theta(s)`` reaches
+    ``L/2 |sin(yaw - theta)| + W/2 |cos(yaw - theta)|`` to either side of its centre.
+    """
+    relative = candidates.yaw - path.heading(candidates.s)
+    half = 0.5 * shape.length * np.abs(np.sin(relative)) + 0.5 * shape.width * np.abs(np.cos(relative))
+    return candidates.d - half, candidates.d + half
+
+
+def breaks_lane_rules(
+    candidates: Candidates, path: ReferencePath, shape: Shape, rules: LaneRules
+) -> np.ndarray:
+    """Which candidates cross the centre line in a binding zone or drive onto a shoulder, shape (n,).
+
+    A candidate breaks the no-overtaking rule if, at a step t > 0 at which its
+    footprint (arc lengths s +- L/2) overlaps a binding zone, its footprint reaches
+    further across the centre line than the ego's does now (t = 0): an ego already
+    across (an overtaking begun before the zone) may return, never go further. It
+    breaks the shoulder rule if its footprint reaches further beyond an outer lane edge
+    than now, at any step.
+
+    Args:
+        candidates: the cycle's candidates.
+        path: the reference path.
+        shape: the ego's footprint.
+        rules: this cycle's ``LaneRules``.
+    """
+    n = candidates.n_traj
+    right, left = lateral_extent(candidates, path, shape)
+    broken = np.zeros(n, dtype=bool)
+    if rules.centre is not None and rules.zones.size:
+        across = np.maximum(left - rules.centre, 0.0)
+        half = 0.5 * shape.length
+        s = candidates.s[:, :, None]
+        in_zone = np.any((s + half > rules.zones[:, 0]) & (s - half < rules.zones[:, 1]), axis=2)
+        further = across[:, 1:] > across[:, :1] + _GROWTH_M
+        broken |= np.any(in_zone[:, 1:] & further, axis=1)
+    if rules.edges is not None:
+        beyond = np.maximum(rules.edges[0] - right, 0.0) + np.maximum(left - rules.edges[1], 0.0)
+        broken |= np.any(beyond[:, 1:] > beyond[:, :1] + _GROWTH_M, axis=1)
+    return broken
+
+
+#: A footprint reaching further across a marking than now by more than this breaks the rule [m]
+#: (rounding only: a plan that holds its lateral position is not a new crossing).
+_GROWTH_M = 1e-3

@@ -304,6 +304,13 @@ def _print_run(record) -> None:  # noqa: ANN001 - a RunRecord, imported lazily
         print(f"  expectations: {summary.verdict.upper()}")
         for e in summary.expectations:
             print(f"    {'pass' if e.passed else 'FAIL'}  {e.name}: expected {e.expected}, got {e.measured}")
+    for v in summary.rule_violations:
+        print(f"  rule violation: {v.rule} ({v.line}) at t={v.time:.2f} s, {v.speed:.1f} m/s")
+    for crossing in summary.extra_metrics.get("amber_crossings", ()):
+        print(
+            f"  amber crossing (dilemma zone, not a violation): {crossing['line']} at "
+            f"t={crossing['time']:.2f} s, {crossing['speed']:.1f} m/s"
+        )
     for impact in summary.collisions:
         m = impact.measurement
         print(

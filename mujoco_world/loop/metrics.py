@@ -22,8 +22,11 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from ethical_planner.config import VehicleConfig
+from ethical_planner.geometry import rectangle_overlap
 from ethical_planner.road_users import VULNERABLE_TYPES, RoadUserType
-from ethical_planner.traffic_rules import STANDSTILL_MPS
+from ethical_planner.sampling import FrenetState
+from ethical_planner.traffic_rules import STANDSTILL_MPS, lane_blocked, stop_distance
 from mujoco_world.agents.ego_planner import Plan
 from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.loop.config import RunConfig
@@ -386,15 +389,36 @@ class FirstSeen(Metric):
 
 
 class RuleViolations(Metric):
-    """The ego's traffic-rule violations at the scenario's stop lines (``StopLineSpec``).
+    """The ego's traffic-rule violations: stop lines, no-overtaking zones, shoulders.
 
-    Every ``interval`` physics steps the ego's front arc length (``World.ego_progress``
-    + half its length) is compared with each line: crossing it while the light is red
-    is a ``red_light`` violation; crossing a stop sign's line without having stood still
-    (speed below ``STANDSTILL_MPS``) while its front was within ``stop_zone`` before the
-    line is a ``stop_sign`` violation. A line is judged once, when first crossed.
+    Every ``interval`` physics steps:
 
-    Value: ``rule_violations`` (``RuleViolation`` records, in time order).
+    - Stop lines (``StopLineSpec``): the ego's front arc length (``World.ego_progress``
+      + half its length) is compared with each line: crossing it while the light is
+      red is a ``red_light`` violation; crossing a stop sign's line without having
+      stood still (speed below ``STANDSTILL_MPS``) while its front was within
+      ``stop_zone`` before the line is a ``stop_sign`` violation. A line is judged
+      once, when first crossed. A crossing on red that the ego could no longer avoid
+      when the light turned red (its stopping distance at the emergency deceleration,
+      8 m/s^2 after the jerk ramp, ``traffic_rules.stop_distance``, exceeded its gap to
+      the line at the first sample in the red) is the planner's dilemma zone: it is
+      not a violation and is listed in ``amber_crossings`` instead.
+    - Lane markings (``World.lane_extent``, the footprint's offsets across the ego's
+      route): each time the footprint reaches more than ``LANE_TOLERANCE_M`` beyond an
+      outer lane edge it is a ``shoulder`` violation (line ``right`` or ``left``);
+      each time it reaches that far across the centre line while any part of it lies
+      in a no-overtaking zone, and did not a sample before, a ``no_overtaking``
+      violation (line: the zone's name), unless debris or a road user slower than the
+      zone's ``pass_below`` lay in the ego's lane within ``PASS_LOOKAHEAD_M`` ahead
+      (``traffic_rules.lane_blocked``, as the planner asks it: ``passing``). Either
+      entry is ``evasive`` if the ego kept in its lane and braking at
+      ``EVASIVE_DECELERATION`` would still hit a road user or debris within
+      ``EVASIVE_HORIZON_S`` (``_stays_in_lane_and_collides``). Excused entries are not
+      violations.
+
+    Values: ``rule_violations`` (``RuleViolation`` records, in time order) and, if any,
+    ``amber_crossings`` (line name, time [s], speed [m/s]) and ``excused_rule_entries``
+    (rule, line, time, speed, excuse) in ``extra_metrics``.
     """
 
     def __init__(self, interval: int = 10) -> None:
@@ -409,29 +433,171 @@ class RuleViolations(Metric):
         self.zone = np.array([line.stop_zone for line in lines])
         self.crossed = np.zeros(len(lines), dtype=bool)
         self.stood = np.zeros(len(lines), dtype=bool)
+        self.was_red = np.zeros(len(lines), dtype=bool)
+        self.dilemma = np.zeros(len(lines), dtype=bool)
         self.found: list[RuleViolation] = []
+        self.amber: list[dict[str, Any]] = []
+        self.excused: list[dict[str, Any]] = []
+        world = run.world
+        self.environment = world.environment()
+        environment = self.environment
+        self.zones = environment.no_overtaking
+        self.zone_names = [zone.name for zone in run.scenario.road.no_overtaking]
+        self.marked = environment.lane_edges is not None
+        self.on_shoulder = {"right": False, "left": False}
+        self.across = False
 
     def sample(self, run: RunState) -> None:
-        """Judge the lines the ego's front has just crossed."""
-        if not self.lines:
-            return
-        world = run.world
+        """Judge the lines the ego's front has just crossed and its place across the lanes."""
+        if self.lines:
+            self._stop_lines(run.world)
+        if self.marked:
+            self._markings(run.world)
+
+    def _stop_lines(self, world: World) -> None:
         front = world.ego_progress() + 0.5 * float(world.lengths[0])
         speed = float(world.scene.speeds()[0])
         near = ~self.crossed & (front >= self.s - self.zone)
         self.stood |= near & (speed < STANDSTILL_MPS)
         t = world.time
+        red = np.array([line.red_at(t) for line in self.red], dtype=bool)  # a few lines
+        onset = red & ~self.was_red & ~self.crossed
+        if onset.any():
+            vehicle = VehicleConfig()
+            accel = float(world.accelerations_along_heading()[0])
+            state = FrenetState(s=front, s_dot=speed, s_ddot=accel, d=0.0, d_dot=0.0, d_ddot=0.0)
+            stop = float(
+                stop_distance(state, np.array([vehicle.emergency_deceleration]), vehicle.max_jerk)[0]
+            )
+            self.dilemma[onset] = stop > self.s[onset] - front
+        self.dilemma &= red | self.crossed  # a dilemma lasts for its red window
+        self.was_red = red
         for k in np.flatnonzero(~self.crossed & (front >= self.s)):
             self.crossed[k] = True
             line = self.lines[k]
             if line.stop and not self.stood[k]:
                 self.found.append(RuleViolation("stop_sign", line.name, round(t, 6), speed))
-            elif self.red[k].red_at(t):
+            elif red[k] and self.dilemma[k]:
+                self.amber.append({"line": line.name, "time": round(t, 6), "speed": round(speed, 6)})
+            elif red[k]:
                 self.found.append(RuleViolation("red_light", line.name, round(t, 6), speed))
 
+    def _markings(self, world: World) -> None:
+        environment = self.environment
+        speed = float(world.scene.speeds()[0])
+        s, d, right, left = world.lane_extent()
+        edge_r, edge_l = environment.lane_edges  # type: ignore[misc]
+        for side, beyond in (("right", edge_r - right), ("left", left - edge_l)):
+            now = beyond > LANE_TOLERANCE_M
+            if now and not self.on_shoulder[side]:
+                self._entry(world, "shoulder", side, s, speed, None)
+            self.on_shoulder[side] = now
+        if not self.zones or environment.centre_line is None:
+            return
+        across = left - environment.centre_line > LANE_TOLERANCE_M
+        half = 0.5 * float(world.lengths[0])
+        zone = next(
+            (i for i, z in enumerate(self.zones) if s + half > z.start and s - half < z.end),
+            None,
+        )
+        if across and not self.across and zone is not None:
+            others = np.flatnonzero(world.present[1:]) + 1
+            passing = self.zones[zone].pass_below > 0.0 and lane_blocked(
+                environment,
+                (s, d),
+                2.0 * half,
+                world.positions[others],
+                world.scene.speeds()[others],
+                world.widths[others],
+                self.zones[zone].pass_below,
+                PASS_LOOKAHEAD_M,
+            )
+            self._entry(
+                world, "no_overtaking", self.zone_names[zone], s, speed, "passing" if passing else None
+            )
+        self.across = across
+
+    def _entry(self, world: World, rule: str, line: str, s: float, speed: float, excuse: str | None) -> None:
+        """A violation, or an excused entry (``passing`` a slow obstacle, ``evasive``)."""
+        if excuse is None and _stays_in_lane_and_collides(world, s):
+            excuse = "evasive"
+        t = round(world.time, 6)
+        if excuse is None:
+            self.found.append(RuleViolation(rule, line, t, speed))
+        else:
+            self.excused.append(
+                {"rule": rule, "line": line, "time": t, "speed": round(speed, 6), "excuse": excuse}
+            )
+
     def values(self, run: RunState) -> dict[str, Any]:
-        """``rule_violations``."""
-        return {"rule_violations": tuple(self.found)}
+        """``rule_violations`` (and ``amber_crossings`` if any)."""
+        out: dict[str, Any] = {"rule_violations": tuple(sorted(self.found, key=lambda v: v.time))}
+        if self.amber:
+            out["amber_crossings"] = list(self.amber)
+        if self.excused:
+            out["excused_rule_entries"] = list(self.excused)
+        return out
+
+
+def _stays_in_lane_and_collides(world: World, s: float) -> bool:
+    """True if the ego kept in its lane and braking at ``EVASIVE_DECELERATION`` would still hit something.
+
+    The counterfactual ego drives along its route from arc length ``s`` at its speed,
+    braking at ``EVASIVE_DECELERATION`` to a stop; every road user in the world keeps
+    its velocity, debris stands. Checked every 0.1 s for ``EVASIVE_HORIZON_S``
+    (``geometry.rectangle_overlap``). Overtaking a slower vehicle is not evasive (braking
+    behind it avoids it); swerving from an oncoming truck cutting into the lane, or from
+    debris too close to stop for, is.
+    """
+    t = np.arange(0.0, EVASIVE_HORIZON_S + 1e-9, 0.1)
+    v = float(world.speeds_along_heading()[0])
+    moving = np.minimum(t, max(v, 0.0) / EVASIVE_DECELERATION)
+    x, y, theta, _, _ = world.ego_path.evaluate(s + v * moving - 0.5 * EVASIVE_DECELERATION * moving**2)
+    others = np.flatnonzero(world.present[1:]) + 1
+    rows = [
+        np.column_stack(
+            [
+                world.positions[others],
+                world.yaws[others],
+                world.velocities[others],
+                world.lengths[others],
+                world.widths[others],
+            ]
+        )
+    ]
+    rows += [
+        np.array([[*b.center, b.yaw, 0.0, 0.0, 2.0 * b.half_length, 2.0 * b.half_width]])
+        for b in world.debris
+    ]
+    table = np.concatenate(rows, axis=0)
+    if not len(table):
+        return False
+    tt = t[:, None]
+    depth = rectangle_overlap(
+        x[:, None],
+        y[:, None],
+        theta[:, None],
+        world.lengths[0],
+        world.widths[0],
+        table[:, 0] + table[:, 3] * tt,
+        table[:, 1] + table[:, 4] * tt,
+        table[:, 2],
+        table[:, 5],
+        table[:, 6],
+    )
+    return bool(np.any(depth > 0.0))
+
+
+#: The world's judge counts a footprint this far beyond a marking [m] (a tracking error is not a crossing).
+LANE_TOLERANCE_M = 0.1
+#: An entry onto the shoulder or across a zone's centre line is evasive (excused) if the ego kept
+#: in its lane and braking at this deceleration would still hit something within the horizon
+#: [m/s^2, s] (``_stays_in_lane_and_collides``).
+EVASIVE_DECELERATION = 6.0
+EVASIVE_HORIZON_S = 3.0
+#: How far ahead of the ego's front a slow obstacle excuses a crossing in a no-overtaking zone [m]
+#: (the planner's ``TrafficRulesConfig.pass_lookahead``).
+PASS_LOOKAHEAD_M = 40.0
 
 
 class ScriptEvents(Metric):

@@ -18,8 +18,15 @@ the drivable area (the road minus debris) shrunk by the ego's half width plus
 ``margin``, minus every other body's footprint grown by the same amount, is where the
 ego's centre can be; the way is open if the part of it that holds the ego's centre (or
 lies nearest to it) reaches the cross-section. It sees the bodies where they are at
-the end (a passing car blocks while it passes) and ignores right of way; a stop sign
-does not block (the ego stops and goes on).
+the end and ignores right of way; a stop sign does not block (the ego stops and goes
+on). Lane direction counts: a road user driving against the ego's route (its velocity
+along the route below ``-StallConfig.oncoming_speed``; oncoming traffic in its own lane,
+or a wrong-way driver) blocks the stretch it covers in the next
+``StallConfig.oncoming_time`` seconds as well as where it is: the ego cannot use that
+stretch of the other direction's lanes to pass, so a queue of oncoming cars closes the
+way and an ego waiting behind an obstacle for a gap in it has stopped safely. Before,
+the test saw oncoming cars only where they stood at the end, and the gaps between them
+read as an open passage (``no_progress``).
 """
 
 from __future__ import annotations
@@ -46,16 +53,25 @@ class StallConfig:
             red light must be to excuse the wait) [m].
         margin: clearance a passage leaves on each side of the ego [m] (the planner's
             road-edge margin is 0.25 m).
+        oncoming_time: an oncoming road user blocks what it covers in this time [s]
+            (the time a pass beside an obstacle takes: 5 s covers a 20 m pass from a
+            standstill at 1.6 m/s^2).
+        oncoming_speed: road users faster than this against the ego's route are
+            oncoming [m/s].
     """
 
     window: float = 5.0
     distance: float = 1.0
     lookahead: float = 20.0
     margin: float = 0.25
+    oncoming_time: float = 5.0
+    oncoming_speed: float = 0.5
 
     def __post_init__(self) -> None:
         check_positive("stall", window=self.window, distance=self.distance, lookahead=self.lookahead)
-        check_non_negative("stall", margin=self.margin)
+        check_non_negative(
+            "stall", margin=self.margin, oncoming_time=self.oncoming_time, oncoming_speed=self.oncoming_speed
+        )
 
 
 def waiting_at_red(world: World, lookahead: float) -> str | None:
@@ -67,8 +83,18 @@ def waiting_at_red(world: World, lookahead: float) -> str | None:
     return None
 
 
-def blocked_way(world: World, lookahead: float, margin: float) -> bool:
-    """True if no passage of the ego's width leads ``lookahead`` ahead of its front (module docstring)."""
+def blocked_way(
+    world: World, lookahead: float, margin: float, oncoming_time: float = 0.0, oncoming_speed: float = 0.5
+) -> bool:
+    """True if no passage of the ego's width leads ``lookahead`` ahead of its front (module docstring).
+
+    Args:
+        world: the world at the end of the run.
+        lookahead: [m].
+        margin: [m].
+        oncoming_time: an oncoming road user also blocks what it covers in this time [s].
+        oncoming_speed: [m/s]; faster than this against the route is oncoming.
+    """
     environment = world.environment()  # the road minus debris
     path = environment.reference_path
     reach = 0.5 * float(world.widths[0]) + margin
@@ -76,7 +102,22 @@ def blocked_way(world: World, lookahead: float, margin: float) -> bool:
     others = np.flatnonzero(world.present[1:]) + 1
     if others.size:
         x, y = world.positions[others, 0], world.positions[others, 1]
-        cx, cy = rectangle_corners(x, y, world.yaws[others], world.lengths[others], world.widths[others])
+        # An oncoming body's footprint is stretched back along its velocity: where it
+        # will be within ``oncoming_time`` (its length grows, its centre moves half that way).
+        s_k, _ = path.to_frenet(x, y)
+        theta = path.heading(s_k)
+        vx, vy = world.velocities[others, 0], world.velocities[others, 1]
+        along = vx * np.cos(theta) + vy * np.sin(theta)
+        oncoming = along < -oncoming_speed
+        sweep = np.where(oncoming, np.hypot(vx, vy) * oncoming_time, 0.0)
+        heading = np.where(oncoming & (sweep > 0.0), np.arctan2(vy, vx), world.yaws[others])
+        cx, cy = rectangle_corners(
+            x + 0.5 * sweep * np.cos(heading),
+            y + 0.5 * sweep * np.sin(heading),
+            heading,
+            world.lengths[others] + sweep,
+            world.widths[others],
+        )
         bodies = shapely.polygons(np.stack([cx, cy], axis=-1))
         free = free.difference(shapely.union_all(shapely.buffer(bodies, reach)))
     front = world.ego_progress() + 0.5 * float(world.lengths[0])

@@ -276,7 +276,7 @@ class TimeLimit(StopRule):
         light = waiting_at_red(world, stall.lookahead)
         if light is not None:
             return Stop("stopped_safely", f"{reason}; the ego waits at the red light {light!r}")
-        if blocked_way(world, stall.lookahead, stall.margin):
+        if blocked_way(world, stall.lookahead, stall.margin, stall.oncoming_time, stall.oncoming_speed):
             return Stop(
                 "stopped_safely",
                 f"{reason}; the ego stands, no passage of its width open {stall.lookahead:g} m ahead",

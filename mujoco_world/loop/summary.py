@@ -79,13 +79,16 @@ class ExpectationResult:
 
 @dataclass(frozen=True, slots=True)
 class RuleViolation:
-    """A traffic rule the ego broke (``scenario.spec.StopLineSpec``).
+    """A traffic rule the ego broke (``loop.metrics.RuleViolations``).
 
     Attributes:
-        rule: ``red_light`` (crossed a stop line on red) or ``stop_sign`` (crossed a stop
-            sign's line without standing still before it).
-        line: the stop line's name.
-        time: when the ego's front crossed the line [s].
+        rule: ``red_light`` (crossed a stop line on red, not in the dilemma zone),
+            ``stop_sign`` (crossed a stop sign's line without standing still before it),
+            ``no_overtaking`` (its footprint entered the other direction's lanes in a
+            no-overtaking zone) or ``shoulder`` (its footprint went beyond an outer lane
+            edge).
+        line: the stop line's or the zone's name; ``right`` or ``left`` for a shoulder.
+        time: when the ego's front crossed the line, or its footprint the marking [s].
         speed: the ego's speed then [m/s].
     """
 

@@ -19,7 +19,7 @@ import mujoco
 import numpy as np
 import shapely
 
-from ethical_planner.environment import RoadEnvironment
+from ethical_planner.environment import NoOvertakingZone, RoadEnvironment
 from ethical_planner.geometry import rectangle_overlap
 from ethical_planner.reference_path import ReferencePath
 from ethical_planner.road_users import VULNERABLE_TYPES, KinematicState, MotionHistory, RoadUser, Shape
@@ -41,6 +41,7 @@ from mujoco_world.scenario.road import StaticBox, box_footprint, build_road, deb
 from mujoco_world.scenario.spec import (
     BehaviourKind,
     Boundary,
+    NoOvertakingSpec,
     PostCrashPolicy,
     RoadKind,
     RoadName,
@@ -394,6 +395,8 @@ class World:
     def environment(self) -> RoadEnvironment:
         """The road as the planner sees it: the ego route, lanes, drivable area (minus debris), stop lines."""
         spec = self.scenario.road
+        centre = edges = None
+        zones: tuple[NoOvertakingZone, ...] = ()
         if spec.map is not None:
             width, offsets = spec.map.lane_width, spec.map.lane_offsets
         else:
@@ -402,6 +405,15 @@ class World:
                 lane = 1  # its reference path ends in lane 1 (``RoadGeometry.merge_route``)
             width = spec.lane_width
             offsets = tuple((k - lane) * spec.lane_width for k in range(spec.lanes))
+            # Markings relative to the ego's route (its start lane's centre line).
+            d_ego = self.road.lane_offset(lane, 1)
+            road_edges = self.road.lane_edges()
+            edges = (float(road_edges[0] - d_ego), float(road_edges[-1] - d_ego))
+            if self.road.centre_offset is not None:
+                centre = self.road.centre_offset - d_ego
+            zones = tuple(
+                NoOvertakingZone(*self.zone_span(zone), zone.pass_below) for zone in spec.no_overtaking
+            )
         area = self.road.drivable_area
         if self.debris:
             # Debris is a hole in the drivable area: the planner keeps off it as off the road's edges.
@@ -413,7 +425,24 @@ class World:
             lane_offsets=offsets,
             speed_limit=spec.speed_limit,
             stop_lines=tuple(line.as_stop_line() for line in self.scenario.stop_lines),
+            centre_line=centre,
+            lane_edges=edges,
+            no_overtaking=zones,
         )
+
+    def zone_span(self, zone: NoOvertakingSpec) -> tuple[float, float]:
+        """A no-overtaking zone's (start, end) as arc lengths along the ego's route [m].
+
+        The zone is given along the main road's reference line; its ends are projected
+        onto the ego's route (on a curve the ego's lane is longer or shorter than the
+        reference line).
+        """
+        line = self.road.main_line
+        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
+        s = np.array([zone.start, zone.end])
+        x, y = np.interp(s, arc, line[:, 0]), np.interp(s, arc, line[:, 1])
+        s_ego, _ = self.ego_path.to_frenet(x, y)
+        return float(s_ego[0]), float(s_ego[1])
 
     # ------------------------------------------------------------------ state
 
@@ -447,6 +476,22 @@ class World:
         """Arc length of the ego along its route [m]."""
         s, _ = self.ego_path.to_frenet(self.scene.qpos[0, 0], self.scene.qpos[0, 1])
         return float(s)
+
+    def lane_extent(self) -> tuple[float, float, float, float]:
+        """The ego across its route: (s, d, right, left) [m].
+
+        s, d: its centre's Frenet coordinates along the route; right, left: the offsets
+        of its footprint's outermost points, d -+ (L/2 |sin(yaw - theta)| + W/2
+        |cos(yaw - theta)|) with theta the route's heading at s.
+        """
+        x, y, yaw = self.scene.qpos[0, 0], self.scene.qpos[0, 1], self.scene.qpos[0, 2]
+        s, d = self.ego_path.to_frenet(x, y)
+        s, d = float(np.asarray(s).reshape(-1)[0]), float(np.asarray(d).reshape(-1)[0])
+        relative = float(yaw) - float(self.ego_path.heading(s))
+        half = 0.5 * float(self.lengths[0]) * abs(math.sin(relative)) + 0.5 * float(self.widths[0]) * abs(
+            math.cos(relative)
+        )
+        return s, d, d - half, d + half
 
     def goal_reached(self) -> bool:
         """True once the ego has reached its goal.

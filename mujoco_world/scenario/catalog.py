@@ -32,6 +32,7 @@ from mujoco_world.scenario.spec import (
     IdmSpec,
     LegalSpec,
     MobilSpec,
+    NoOvertakingSpec,
     RoadSpec,
     RoadUserSpec,
     RouteSpec,
@@ -757,6 +758,64 @@ def scrape_wall_for_child(rng: np.random.Generator | None = None) -> Scenario:
     )
 
 
+def no_overtaking_zone(rng: np.random.Generator | None = None) -> Scenario:
+    """A cyclist at 22 km/h in the ego lane inside a no-overtaking zone; no oncoming traffic.
+
+    [expect] the planners follow the cyclist to the zone's end (crossing the centre line
+    in the zone is level 4, ``ethical_planner.traffic_rules.breaks_lane_rules``; the
+    cyclist is faster than the zone's 10 mph exception), overtake after it and reach
+    the goal with no rule violation. With ``traffic_rules.no_overtaking = false`` the planner
+    overtakes inside the zone and the world reports a ``no_overtaking`` violation.
+    """
+    draw = _Draw(rng)
+    zone = NoOvertakingSpec(start=40.0, end=draw(160.0, 140.0, 190.0), name="bend_ahead")
+    road = RoadSpec(length=360.0, speed_limit=16.7, no_overtaking=(zone,))
+    cyclist = _user(
+        "cyclist",
+        "bicycle",
+        RouteSpec(lane=0, offset=-1.0),
+        draw(60.0, 50.0, 70.0),
+        _scripted(draw(6.0, 5.0, 7.0)),
+        legal=LegalSpec(speed_limit=8.0, lateral_half_width=0.6),
+    )
+    return Scenario(
+        name="no_overtaking_zone",
+        description="a cyclist at 22 km/h in a no-overtaking zone: follow it, overtake after the zone",
+        road=road,
+        ego=EgoSpec(s0=10.0, speed=draw(14.0, 12.0, 16.0), goal_s=340.0),
+        road_users=(cyclist,),
+        duration=45.0,
+        expect=ExpectSpec(max_rule_violations=0, ego_collision=False, reach_goal=True),
+    )
+
+
+def stop_sign(rng: np.random.Generator | None = None) -> Scenario:
+    """A stop sign before a junction whose cross traffic passes while the ego stands.
+
+    [expect] the planners stop with their front within the sign's 10 m stop zone, stand
+    still, then drive on behind the crossing car and reach the goal with no violation.
+    ``keep_lane`` drives through: a ``stop_sign`` violation.
+    """
+    draw = _Draw(rng)
+    road = RoadSpec(kind="intersection", length=160.0, speed_limit=13.9)
+    half = 0.5 * road.length
+    line = StopLineSpec("stop", s=half - road.half_width - road.shoulder - 2.0, stop=True)
+    cross_speed = draw(11.0, 9.0, 13.0)
+    # The cross car reaches the ego's path about 7 s after the start.
+    crossing = _user("crossing", "car", RouteSpec(road="cross", lane=0), max(half - 7.0 * cross_speed, 1.0),
+                     _scripted(cross_speed))  # fmt: skip
+    return Scenario(
+        name="stop_sign",
+        description="a stop sign before a junction; a car crosses while the ego stands",
+        road=road,
+        ego=EgoSpec(s0=10.0, speed=draw(11.0, 9.0, 13.0), goal_s=150.0),
+        road_users=(crossing,),
+        stop_lines=(line,),
+        duration=30.0,
+        expect=ExpectSpec(max_rule_violations=0, ego_collision=False, reach_goal=True),
+    )
+
+
 # --------------------------------------------------------------------------- registry
 
 
@@ -859,6 +918,8 @@ _FAMILIES = (
     on_ramp_merge,
     cut_in_reactive,
     cut_in_blind,
+    no_overtaking_zone,
+    stop_sign,
 )
 
 #: Name -> family, in catalog order.

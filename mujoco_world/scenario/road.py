@@ -76,6 +76,8 @@ class StaticBox:
 #: Painted length and gap of a dashed lane line [m] (a German rural road's 3 m / 6 m).
 DASH_M = 3.0
 GAP_M = 6.0
+#: Half the distance between the two lines of a no-overtaking zone's double centre line [m].
+ZONE_LINE_GAP_M = 0.15
 
 
 def dashes(points: np.ndarray, dash: float, gap: float) -> list[np.ndarray]:
@@ -107,10 +109,14 @@ class LaneMarkings:
     Attributes:
         solid: solid lines (outer lane edges, the centre line) [m], each shape (k, 2).
         dashed: the dashes of the lines between lanes of one direction [m], each shape (k, 2).
+        no_overtaking: the no-overtaking zones' double line, two solid lines
+            ``ZONE_LINE_GAP_M`` apart on either side of the centre line along each zone
+            [m], each shape (k, 2).
     """
 
     solid: tuple[np.ndarray, ...]
     dashed: tuple[np.ndarray, ...]
+    no_overtaking: tuple[np.ndarray, ...] = ()
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -224,7 +230,16 @@ class RoadGeometry:
                     solid.append(marking)
                 else:
                     dashed.extend(dashes(marking, DASH_M, GAP_M))
-        return LaneMarkings(tuple(solid), tuple(dashed))
+        zones: list[np.ndarray] = []
+        line = self.main_line
+        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
+        for zone in spec.no_overtaking:  # a few zones
+            inner = (arc > zone.start) & (arc < zone.end)
+            s = np.concatenate([[zone.start], arc[inner], [zone.end]])
+            piece = np.column_stack([np.interp(s, arc, line[:, 0]), np.interp(s, arc, line[:, 1])])
+            for side in (-1.0, 1.0):
+                zones.append(offset_polyline(piece, float(self.centre_offset) + side * ZONE_LINE_GAP_M))
+        return LaneMarkings(tuple(solid), tuple(dashed), tuple(zones))
 
     def _line(self, road: RoadName) -> np.ndarray:
         if road is RoadName.CROSS:

@@ -122,6 +122,9 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "sensor.offset": (-15.0, 15.0, "m"),
     "debris.s": (0.0, 20000.0, "m"),
     "stop_line.s": (0.0, 20000.0, "m"),
+    "no_overtaking.start": (0.0, 20000.0, "m"),
+    "no_overtaking.end": (0.0, 20000.0, "m"),
+    "no_overtaking.pass_below": (0.0, 70.0, "m/s"),
     "stop_line.stop_zone": (0.5, 100.0, "m"),
     "debris.offset": (-20.0, 20.0, "m"),
     "debris.length": (0.1, 20.0, "m"),
@@ -230,6 +233,44 @@ class BehaviourKind(StrEnum):
 
 
 @dataclass(frozen=True, slots=True)
+class NoOvertakingSpec:
+    """A no-overtaking zone of the main road (``[[road.no_overtaking]]``).
+
+    Inside it the ego keeps out of the lanes of the other direction: the planner makes
+    a candidate whose footprint moves further across the centre line invalid (level 4,
+    ``ethical_planner.traffic_rules.breaks_lane_rules``), and the world counts each time
+    the ego's footprint enters the other direction's lanes inside the zone as a
+    ``no_overtaking`` violation (``loop.metrics.RuleViolations``). Passing debris, or a
+    road user slower than ``pass_below``, that blocks the ego's lane is not overtaking
+    (the UK Highway Code, rule 129: a solid centre line may be crossed to pass a
+    stationary vehicle, or a cyclist, horse or road works vehicle at 10 mph or less).
+
+    Attributes:
+        start, end: arc lengths along the main road's reference line [m], start < end.
+        name: identifier for the summary (default ``no_overtaking_<i>``).
+        pass_below: [m/s]; 4.47 is 10 mph; 0 allows no exception.
+    """
+
+    start: float
+    end: float
+    name: str = ""
+    pass_below: float = 4.47
+
+    def __post_init__(self) -> None:
+        check_finite("no_overtaking", start=self.start, end=self.end, pass_below=self.pass_below)
+        check_non_negative("no_overtaking", start=self.start, pass_below=self.pass_below)
+        check(
+            self.start < self.end,
+            f"no_overtaking.end must lie beyond no_overtaking.start ({self.start:g} m), got {self.end:g}",
+        )
+        check(
+            isinstance(self.name, str) and (not self.name or self.name.isidentifier()),
+            f"no_overtaking.name must be an identifier (letters, digits, _), got {self.name!r}",
+        )
+        check_plausible("no_overtaking", self)
+
+
+@dataclass(frozen=True, slots=True)
 class RoadSpec:
     """Road geometry.
 
@@ -265,6 +306,8 @@ class RoadSpec:
             lane (lane 0, the right-most) has ended [m].
         taper: merge roads: length of the taper before ``lane_drop`` over which the
             acceleration lane narrows from full width to nothing [m].
+        no_overtaking: no-overtaking zones of the main road (``NoOvertakingSpec``); they
+            need lanes in both directions. Unnamed zones are named ``no_overtaking_<i>``.
     """
 
     kind: RoadKind = RoadKind.STRAIGHT
@@ -283,6 +326,7 @@ class RoadSpec:
     map: MapSpec | None = None
     lane_drop: float = 150.0
     taper: float = 50.0
+    no_overtaking: tuple[NoOvertakingSpec, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kind", parse_enum(RoadKind, self.kind, "road kind", "road.kind"))
@@ -325,6 +369,29 @@ class RoadSpec:
             f"road.lanes_forward must be an integer in 0..road.lanes ({self.lanes}), got {forward!r}",
         )
         object.__setattr__(self, "lanes_forward", forward)
+        zones = tuple(
+            zone
+            if zone.name
+            else NoOvertakingSpec(zone.start, zone.end, f"no_overtaking_{i}", zone.pass_below)
+            for i, zone in enumerate(self.no_overtaking)
+        )
+        object.__setattr__(self, "no_overtaking", zones)
+        if zones:
+            check(
+                self.kind is not RoadKind.MAP and 0 < forward < self.lanes,
+                "road.no_overtaking needs a centre line: lanes in both directions "
+                f"(road.lanes = {self.lanes}, road.lanes_forward = {forward}) on a straight, curved or "
+                "intersection road",
+            )
+        for i, zone in enumerate(zones):
+            check(
+                zone.end <= self.length,
+                f"road.no_overtaking[{i}] ({zone.name}).end must lie on the road (<= road.length "
+                f"{self.length:g} m), got {zone.end:g}",
+            )
+        names = [zone.name for zone in zones]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        check(not twice, f"road.no_overtaking: duplicate names {twice}")
         if self.kind is RoadKind.CURVED:
             check(
                 0 < abs(self.curve_angle) <= 180,

@@ -14,7 +14,8 @@ Entities (all in the world frame, z up, road plane z = 0):
 * ``world/road/{surface,boundary,lanes,walls}`` (static): drivable area, its outline,
   lane markings (``RoadGeometry.lane_markings``: solid outer lane edges and centre line
   between the directions, dashed lines between lanes of one direction), wall or kerb
-  boxes.
+  boxes; ``world/road/no_overtaking``: each no-overtaking zone's double centre line
+  (amber).
 * ``world/ego`` and ``world/road_users/{boxes,round}`` every logged frame: boxes
   (Boxes3D with yaw quaternions) and pedestrians as cylinders, coloured by type,
   labelled ``type #id``; ``world/ego_path``: the executed ego path.
@@ -581,6 +582,14 @@ class RerunRecorder(RunObserver):
             rec.log(
                 "world/road/lanes",
                 rr.LineStrips3D([_to3(line) for line in lines], colors=[(250, 250, 200)], radii=0.06),
+                static=True,
+            )
+        if markings.no_overtaking:
+            rec.log(
+                "world/road/no_overtaking",
+                rr.LineStrips3D(
+                    [_to3(line) for line in markings.no_overtaking], colors=[(255, 190, 40)], radii=0.07
+                ),
                 static=True,
             )
         boxes = road.static_boxes()

@@ -1,14 +1,26 @@
 """Stop lines in the planner: stop distances, red-window timing, the dilemma zone, stop targets."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
+import shapely
 
 from ethical_planner.config import SamplingConfig, TrafficRulesConfig, VehicleConfig, preset
-from ethical_planner.environment import RoadEnvironment, StopLine
+from ethical_planner.environment import NoOvertakingZone, RoadEnvironment, StopLine
 from ethical_planner.planner import Planner
-from ethical_planner.road_users import EGO_SHAPE, KinematicState
+from ethical_planner.road_users import EGO_SHAPE, KinematicState, RoadUser, Shape
 from ethical_planner.sampling import CandidateKind, FrenetState, _stop_target_motion
-from ethical_planner.traffic_rules import StopLines, breaks_stop_lines, crossing_times, stop_distance
+from ethical_planner.traffic_rules import (
+    LaneRules,
+    StopLines,
+    breaks_lane_rules,
+    breaks_stop_lines,
+    crossing_times,
+    lane_blocked,
+    lateral_extent,
+    stop_distance,
+)
 from ethical_planner.validity import Validity
 
 VEHICLE = VehicleConfig()  # emergency 8 m/s^2, jerk 30 m/s^3
@@ -236,3 +248,135 @@ def test_a_plan_keeps_clear_of_the_red_by_the_margin():
     assert not broken(((2.05, 5.0),), 0.5)
     with pytest.raises(ValueError, match="red_margin"):
         TrafficRulesConfig(red_margin=-0.1)
+
+
+# --------------------------------------------------------------------------- lane markings
+
+
+def _marked_road(zones=(), edges=None, debris=None):
+    """A straight two-lane road along +x, the ego lane centred on y = 0, the centre line at d = 1.75 m.
+
+    ``edges`` (the outer lane edges, the shoulder rule) only if given: the zone tests keep it off.
+    """
+    env = RoadEnvironment.along_path(
+        np.array([[0.0, 0.0], [400.0, 0.0]]), lanes_left=1, speed_limit=16.7, margin=0.5
+    )
+    area = env.drivable_area if debris is None else env.drivable_area.difference(debris)
+    return RoadEnvironment(
+        env.reference_path,
+        area,
+        env.lane_width,
+        env.lane_offsets,
+        env.speed_limit,
+        centre_line=1.75,
+        lane_edges=edges,
+        no_overtaking=tuple(zones),
+    )
+
+
+def _poses(s, d, yaw=0.0):
+    """Stand-in candidates along the straight path: s, d [m], yaw [rad], shape (n, n_t)."""
+    s, d = np.atleast_2d(np.asarray(s, dtype=float)), np.atleast_2d(np.asarray(d, dtype=float))
+    return SimpleNamespace(
+        s=s, d=d, yaw=np.broadcast_to(np.asarray(yaw, dtype=float), s.shape), n_traj=s.shape[0]
+    )
+
+
+def test_footprint_extent_across_the_path_by_hand():
+    path = _marked_road().reference_path
+    shape = Shape(4.0, 2.0)
+    # At 30 deg to the path: half extent 2 sin 30 + 1 cos 30 = 1 + 0.866 = 1.866 m.
+    right, left = lateral_extent(_poses([[10.0]], [[0.5]], np.radians(30.0)), path, shape)
+    assert left[0, 0] == pytest.approx(0.5 + 1.0 + 0.8660254, abs=1e-6)
+    assert right[0, 0] == pytest.approx(0.5 - 1.8660254, abs=1e-6)
+
+
+def test_crossing_the_centre_line_in_a_zone_breaks_the_rule_and_outside_does_not():
+    path = _marked_road().reference_path
+    shape = Shape(4.0, 2.0)
+    rules = LaneRules(1.75, np.array([[50.0, 100.0]]), None)
+    # Each row: s over 3 steps, d over 3 steps. The footprint's left edge is d + 1 m,
+    # its s extent s +- 2 m.
+    s = [
+        [40.0, 50.0, 60.0],  # d 0 -> 1.0: left edge 2.0 > 1.75 at s = 60 (footprint 58..62 in the zone)
+        [110.0, 120.0, 130.0],  # the same move behind the zone (footprint from 108 m)
+        [43.0, 45.0, 48.5],  # across only at s = 48.5: its front (50.5 m) is in the zone
+        [43.0, 45.0, 47.5],  # across only at s = 47.5: its front (49.5 m) is not
+        [60.0, 70.0, 80.0],  # across now (d = 1.0) and returning: allowed
+        [60.0, 70.0, 80.0],  # d 0.7: left edge 1.7 m, short of the line
+    ]
+    d = [[0.0, 0.5, 1.0], [0.0, 0.5, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 0.6, 0.0], [0.0, 0.7, 0.7]]
+    broken = breaks_lane_rules(_poses(s, d), path, shape, rules)
+    assert broken.tolist() == [True, False, True, False, False, False]
+    # A heading counts: d = 0.5 at 30 deg reaches 2.366 m, at 0 deg 1.5 m.
+    turned = _poses([[60.0, 61.0]], [[0.5, 0.5]], [0.0, np.radians(30.0)])
+    assert breaks_lane_rules(turned, path, shape, rules).tolist() == [True]
+
+
+def test_driving_onto_a_shoulder_breaks_the_rule_unless_returning():
+    path = _marked_road().reference_path
+    shape = Shape(4.0, 2.0)
+    rules = LaneRules(None, np.zeros((0, 2)), (-1.75, 5.25))
+    d = [[0.0, -0.5, -0.8], [0.0, -0.5, -0.7], [-1.2, -0.9, -0.5], [0.0, 2.0, 4.3], [0.0, 2.0, 4.2]]
+    s = [[10.0, 20.0, 30.0]] * 5
+    # Right edges -1.8 (beyond -1.75), -1.7; returning from -2.2; left edges 5.3 (beyond 5.25), 5.2.
+    assert breaks_lane_rules(_poses(s, d), path, shape, rules).tolist() == [True, False, False, True, False]
+
+
+def _slow_car(x, v):
+    return RoadUser(1, "truck", KinematicState(x=x, y=0.0, yaw=0.0, v=v), Shape(6.0, 2.5), mass=7000.0)
+
+
+def _crosses(decision, centre=1.75):
+    return float(np.max(decision.trajectory.y)) + 0.5 * EGO_SHAPE.width > centre
+
+
+def test_the_planner_keeps_behind_a_slow_vehicle_in_a_zone_and_not_outside():
+    ego = KinematicState(x=40.0, y=0.0, yaw=0.0, v=14.0)
+    tractor = _slow_car(62.0, 7.0)  # 7 m/s: faster than the 10 mph exception
+    inside = Planner(preset("ethical"), _marked_road([NoOvertakingZone(0.0, 300.0)]))
+    decision = inside.plan(ego, [tractor], now=0.0)
+    assert decision.level == Validity.VALID and not _crosses(decision)
+    assert decision.level_counts[int(Validity.BREAKS_TRAFFIC_RULE)] > 0
+    # The zone behind the ego (it ended 10 m behind its rear, 37.7 m), or the rule off:
+    # no candidate breaks a rule.
+    behind = Planner(preset("ethical"), _marked_road([NoOvertakingZone(0.0, 27.0)]))
+    assert int(Validity.BREAKS_TRAFFIC_RULE) not in behind.plan(ego, [tractor], now=0.0).level_counts
+    off = preset("ethical").with_overrides({"traffic_rules": {"no_overtaking": False}})
+    decision = Planner(off, _marked_road([NoOvertakingZone(0.0, 300.0)])).plan(ego, [tractor], now=0.0)
+    assert int(Validity.BREAKS_TRAFFIC_RULE) not in decision.level_counts
+
+
+def test_a_zone_lets_the_ego_pass_something_slower_than_its_exception():
+    ego = KinematicState(x=40.0, y=0.0, yaw=0.0, v=8.0)
+    zone = NoOvertakingZone(0.0, 300.0)
+    # A stalled car (0.5 m/s < 4.47 m/s) 22 m ahead blocks the lane: passing it is allowed.
+    decision = Planner(preset("ethical"), _marked_road([zone])).plan(ego, [_slow_car(62.0, 0.5)], now=0.0)
+    assert int(Validity.BREAKS_TRAFFIC_RULE) not in decision.level_counts
+    # Debris in the lane (a hole of the drivable area) likewise.
+    debris = shapely.box(70.0, -1.0, 71.2, 0.4)
+    lane = _marked_road([zone], debris=debris)
+    assert (
+        int(Validity.BREAKS_TRAFFIC_RULE)
+        not in Planner(preset("ethical"), lane).plan(ego, [], now=0.0).level_counts
+    )
+    # A zone without the exception (pass_below = 0) binds.
+    strict = _marked_road([NoOvertakingZone(0.0, 300.0, pass_below=0.0)], debris=debris)
+    decision = Planner(preset("ethical"), strict).plan(ego, [], now=0.0)
+    assert decision.level_counts[int(Validity.BREAKS_TRAFFIC_RULE)] > 0 and not _crosses(decision)
+
+
+def test_lane_blocked_by_hand():
+    env = _marked_road()
+    # Ego centre at s = 40 m, 4 m long: "ahead" is 38 .. 82 m (front 42 + 40 m).
+    at = np.array([[81.0, 0.0], [83.0, 0.0], [60.0, 3.5], [60.0, 2.2]])
+    speeds, widths = np.zeros(4), np.full(4, 2.0)
+    blocked = [
+        lane_blocked(env, (40.0, 0.0), 4.0, at[i : i + 1], speeds[:1], widths[:1], 1.0, 40.0)
+        for i in range(4)
+    ]
+    # In reach; beyond it; in the other lane; reaching 1.2 m into the ego lane (edge at 1.75).
+    assert blocked == [True, False, False, True]
+    assert not lane_blocked(
+        env, (40.0, 0.0), 4.0, at[:1], np.array([1.0]), widths[:1], 1.0, 40.0
+    )  # not slower

@@ -148,6 +148,8 @@ def test_scenarios_json_lists_expectations(capsys):
     entries = {e["name"]: e for e in json.loads(capsys.readouterr().out)}
     assert entries["child_between_parked"]["expect"] == {"ego_collision": False, "max_vulnerable_harm": 0.0}
     assert entries["oncoming_drift"]["expect"] == {}
+    both = {"max_rule_violations": 0, "ego_collision": False, "reach_goal": True}
+    assert entries["no_overtaking_zone"]["expect"] == both and entries["stop_sign"]["expect"] == both
 
 
 def test_comparison_table_shows_the_test_suite(tmp_path):

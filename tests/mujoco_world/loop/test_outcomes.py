@@ -5,8 +5,9 @@ import re
 import pytest
 
 from mujoco_world.loop.config import RunConfig
-from mujoco_world.loop.progress import StallConfig
+from mujoco_world.loop.progress import StallConfig, blocked_way
 from mujoco_world.loop.runner import run_scenario
+from mujoco_world.loop.world import World
 from mujoco_world.scenario.spec import scenario_from_dict
 
 
@@ -101,3 +102,28 @@ def test_a_slow_ego_that_keeps_moving_is_a_timeout():
 def test_bad_stall_settings_are_named(bad):
     with pytest.raises(ValueError, match=f"stall.{next(iter(bad))}"):
         StallConfig(**bad)
+
+
+def _oncoming(name, x, speed=10.0, length=100.0):
+    """A car in the other direction's lane at x [m], driving towards the ego at ``speed``."""
+    route = {"lane": 0, "direction": -1}
+    behaviour = {"kind": "scripted", "speed": speed}
+    return {"name": name, "type": "car", "s0": length - x, "route": route, "behaviour": behaviour}
+
+
+def test_oncoming_traffic_closes_the_passage_it_will_drive_through():
+    # The ego (front at 7.25 m) stands behind a car in its lane at 15 m; the way is
+    # judged at the cross-section 20 m ahead of its front, x = 27.25 m. An oncoming car
+    # at x = 50 m and 10 m/s covers x in [0 - 2.25, 50 + 2.25] in the next 5 s: closed.
+    world = World(_standing([_parked("car", 15.0, 0), _oncoming("on", 50.0)]))
+    assert blocked_way(world, 20.0, 0.25, oncoming_time=5.0)
+    # Seen only where it is (the old test), the gap before it read as open.
+    assert not blocked_way(world, 20.0, 0.25, oncoming_time=0.0)
+    # At x = 90 m it covers [37.75, 92.25]; grown by the ego's half width + margin
+    # (1.055 m) it starts at 36.7 m, beyond the cross-section: open.
+    far = World(_standing([_parked("car", 15.0, 0), _oncoming("on", 90.0)]))
+    assert not blocked_way(far, 20.0, 0.25, oncoming_time=5.0)
+    # A car driving the ego's way in the other lane moves off: it blocks only where it is.
+    ahead = {"name": "away", "type": "car", "s0": 50.0, "route": {"lane": 1, "wrong_way": True},
+             "behaviour": {"kind": "scripted", "speed": 10.0}}  # fmt: skip
+    assert not blocked_way(World(_standing([_parked("car", 15.0, 0), ahead])), 20.0, 0.25, oncoming_time=5.0)

@@ -6,6 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from ethical_planner.config import preset
 from ethical_planner.environment import StopLine
 from mujoco_world.loop.metrics import RuleViolations
 from mujoco_world.loop.runner import run_scenario
@@ -15,7 +16,10 @@ from mujoco_world.scenario.spec import StopLineSpec, scenario_from_dict
 
 
 class _Ego:
-    """A stand-in world: the ego's centre arc length, speed and the time, set by the test."""
+    """A stand-in world: the ego's centre arc length, speed and the time, set by the test.
+
+    Its road has no markings (the stop lines are judged alone), and it does not accelerate.
+    """
 
     def __init__(self) -> None:
         self.lengths = np.array([4.0])
@@ -25,17 +29,24 @@ class _Ego:
     def ego_progress(self) -> float:
         return self.s
 
+    def accelerations_along_heading(self) -> np.ndarray:
+        return np.zeros(1)
 
-def _judge(lines, motion):
-    """Violations of an ego driving ``motion`` (time, centre s, speed) past ``lines``."""
+    def environment(self):
+        return SimpleNamespace(no_overtaking=(), lane_edges=None, centre_line=None)
+
+
+def _judge(lines, motion, values=False):
+    """Violations of an ego driving ``motion`` (time, centre s, speed) past ``lines`` (or all values)."""
     world = _Ego()
-    run = SimpleNamespace(world=world, scenario=SimpleNamespace(stop_lines=tuple(lines)))
+    scenario = SimpleNamespace(stop_lines=tuple(lines), road=SimpleNamespace(no_overtaking=()))
+    run = SimpleNamespace(world=world, scenario=scenario)
     metric = RuleViolations()
     metric.start(run)
     for t, s, v in motion:
         world.time, world.s, world.v = t, s, v
         metric.sample(run)
-    return metric.values(run)["rule_violations"]
+    return metric.values(run) if values else metric.values(run)["rule_violations"]
 
 
 def _drive(speed, s0=0.0, t_end=10.0, dt=0.01):
@@ -51,6 +62,21 @@ def test_crossing_on_red_is_a_violation_and_on_green_is_not():
     assert _judge([StopLineSpec("light", s=50.0, red=((0.0, 4.7),))], _drive(10.0)) == ()
     # Red again later: only the moment of crossing counts, and a line counts once.
     assert _judge([StopLineSpec("light", s=50.0, red=((0.0, 4.7), (4.9, 9.0)))], _drive(10.0)) == ()
+
+
+def test_a_crossing_the_ego_could_not_stop_for_when_the_light_turned_is_amber_not_red():
+    # 10 m/s, no acceleration: braking at 8 m/s^2 after the 30 m/s^3 ramp (0.267 s,
+    # 2.572 m, down to 8.933 m/s) then 8.933^2 / 16 = 4.988 m: 7.56 m in all. The front
+    # (centre + 2 m) is at 10 t + 2 and reaches the line (50 m) at 4.8 s.
+    # Red from 4.1 s: the gap is then 7.0 m < 7.56 m, the planner's dilemma zone.
+    out = _judge([StopLineSpec("light", s=50.0, red=((4.1, 9.0),))], _drive(10.0), values=True)
+    assert out["rule_violations"] == ()
+    (amber,) = out["amber_crossings"]
+    assert amber["line"] == "light" and amber["time"] == pytest.approx(4.8, abs=0.011)
+    # Red from 4.0 s: the gap is 8.0 m > 7.56 m, it could have stopped: a red-light violation.
+    out = _judge([StopLineSpec("light", s=50.0, red=((4.0, 9.0),))], _drive(10.0), values=True)
+    (v,) = out["rule_violations"]
+    assert v.rule == "red_light" and "amber_crossings" not in out
 
 
 def test_a_stop_sign_needs_a_standstill_within_its_zone():
@@ -153,3 +179,153 @@ def test_max_rule_violations_must_be_a_count():
     data = {"name": "t", "road": {"length": 100.0}, "ego": {"s0": 5.0}, "expect": {"max_rule_violations": -1}}
     with pytest.raises(ValueError, match="expect.max_rule_violations must be an integer >= 0"):
         scenario_from_dict(data)
+
+
+# --------------------------------------------------------------------------- lane markings
+
+
+def _zone_world(users=()):
+    """Two lanes (one each way) of 3.5 m, shoulders 0.5 m, a no-overtaking zone from 50 to 100 m."""
+    return World(
+        scenario_from_dict(
+            {
+                "name": "zone",
+                "road": {"length": 200.0, "no_overtaking": [{"start": 50.0, "end": 100.0}]},
+                "ego": {"s0": 10.0, "speed": 0.0},
+                "road_users": list(users),
+            }
+        )
+    )
+
+
+def _judge_poses(world, poses):
+    """The world's judge on an ego placed at ``poses`` (time, x, y) in turn (the ego lane is y = -1.75 m)."""
+    run = SimpleNamespace(world=world, scenario=world.scenario)
+    metric = RuleViolations()
+    metric.start(run)
+    for t, x, y in poses:
+        world.scene.data.time = t
+        world.scene.qpos[0] = (x, y, 0.0)
+        metric.sample(run)
+    return metric.values(run)["rule_violations"]
+
+
+def test_the_world_judges_crossings_in_the_zone_and_shoulder_use():
+    # The ego is 1.61 m wide: at y = -0.5 m (d = 1.25 m from its lane's centre) its left
+    # edge reaches 2.055 m, 0.305 m across the centre line (d = 1.75 m; tolerance 0.1 m).
+    # At y = -3.0 m its right edge reaches d = -2.055 m, 0.305 m beyond the lane edge.
+    poses = [
+        (0.0, 60.0, -1.75),
+        (1.0, 62.0, -0.5),  # across, in the zone: no_overtaking
+        (2.0, 70.0, -0.5),  # still across: the same crossing
+        (3.0, 110.0, -1.75),
+        (4.0, 120.0, -0.5),  # across behind the zone: allowed
+        (5.0, 130.0, -3.0),  # right shoulder
+        (6.0, 140.0, -1.75),
+        (7.0, 150.0, -1.7),  # 0.05 m: within the tolerance
+    ]
+    found = _judge_poses(_zone_world(), poses)
+    assert [(v.rule, v.line, v.time) for v in found] == [
+        ("no_overtaking", "no_overtaking_0", 1.0),
+        ("shoulder", "right", 5.0),
+    ]
+    # The zone's front edge counts: the ego's front (x + 2.254) in the zone at x = 48.
+    assert [v.rule for v in _judge_poses(_zone_world(), [(0.0, 40.0, -1.75), (1.0, 48.0, -0.5)])] == [
+        "no_overtaking"
+    ]
+    assert _judge_poses(_zone_world(), [(0.0, 40.0, -1.75), (1.0, 47.0, -0.5)]) == ()
+
+
+def test_passing_a_standing_car_in_the_zone_is_not_overtaking():
+    stalled = {"name": "stalled", "type": "car", "s0": 75.0, "behaviour": {"kind": "scripted", "speed": 0.0}}
+    poses = [(0.0, 60.0, -1.75), (1.0, 62.0, -0.5)]
+    assert _judge_poses(_zone_world([stalled]), poses) == ()
+    # Beyond the 40 m lookahead (front 64.25 + 40 = 104.25 m) it does not excuse the crossing.
+    far = dict(stalled, s0=110.0)
+    assert [v.rule for v in _judge_poses(_zone_world([far]), poses)] == ["no_overtaking"]
+
+
+def test_zones_are_validated_by_name():
+    base = {"name": "z", "road": {"length": 200.0}}
+    for zone, message in (
+        (
+            {"start": 80.0, "end": 60.0},
+            r"road.no_overtaking\[0\].end must lie beyond no_overtaking.start \(80 m\)",
+        ),
+        (
+            {"start": 50.0, "end": 250.0},
+            r"road.no_overtaking\[0\] \(no_overtaking_0\).end must lie on the road",
+        ),
+        ({"start": -5.0, "end": 60.0}, r"road.no_overtaking\[0\].start must be >= 0"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            scenario_from_dict({**base, "road": {"length": 200.0, "no_overtaking": [zone]}})
+    with pytest.raises(ValueError, match=r"road.no_overtaking needs a centre line"):
+        scenario_from_dict(
+            {
+                **base,
+                "road": {"length": 200.0, "lanes_forward": 2, "no_overtaking": [{"start": 1.0, "end": 9.0}]},
+            }
+        )
+
+
+def test_the_planner_receives_the_markings_as_environment_data():
+    env = _zone_world().environment()
+    # Relative to the ego lane's centre (y = -1.75 m): the centre line at 1.75 m, the
+    # outer lane edges at -1.75 and 5.25 m; the zone along the straight route unchanged.
+    assert env.centre_line == pytest.approx(1.75)
+    assert env.lane_edges == pytest.approx((-1.75, 5.25))
+    (zone,) = env.no_overtaking
+    assert (zone.start, zone.end, zone.pass_below) == pytest.approx((50.0, 100.0, 4.47))
+
+
+def test_the_planner_follows_the_cyclist_through_the_zone_and_overtakes_after_it():
+    """Closed loop (catalog ``no_overtaking_zone``): no violation, the cyclist passed after the zone."""
+    scenario = dataclasses.replace(get_scenario("no_overtaking_zone"), duration=23.0)
+    summary = run_scenario(scenario, "ethical", seed=0)
+    assert summary.rule_violations == () and not summary.ego_collided
+    # The cyclist rides 6 m/s from 60 m: at 23 s it is at 198 m; the ego is past it.
+    assert summary.progress > 60.0 + 6.0 * 23.0 + 3.0
+
+
+def test_without_the_rule_the_planner_overtakes_inside_the_zone():
+    scenario = dataclasses.replace(get_scenario("no_overtaking_zone"), duration=6.0)
+    config = preset("ethical").with_overrides({"traffic_rules": {"no_overtaking": False}})
+    (v,) = run_scenario(scenario, config, seed=0).rule_violations
+    assert (v.rule, v.line) == ("no_overtaking", "bend_ahead") and v.time < 6.0
+
+
+def test_the_stop_sign_catalog_scenario_catches_a_rolling_ego():
+    # keep_lane holds 11 m/s: its front (centre 10 m + 2.254 m) reaches the line at
+    # 80 - 3.5 (half the lanes) - 0.5 (shoulder) - 2 = 74 m after (74 - 12.254) / 11 = 5.613 s.
+    scenario = dataclasses.replace(get_scenario("stop_sign"), duration=6.0)
+    (line,) = scenario.stop_lines
+    assert line.stop and line.s == pytest.approx(74.0)
+    (v,) = run_scenario(scenario, "keep_lane", seed=0).rule_violations
+    assert (v.rule, v.line) == ("stop_sign", "stop") and v.time == pytest.approx(5.613, abs=0.02)
+
+
+def test_an_evasive_move_onto_the_shoulder_is_excused():
+    # A wrong-way car in the ego's lane at x = 85 m, 10 m/s towards the standing ego at
+    # 60 m: bumper gap 25 - 2.254 - 2.25 = 20.5 m, closed after 2.05 s (< 3 s) however the
+    # ego (standing) brakes.
+    def ghost(x):
+        route = {"lane": 1, "direction": -1, "wrong_way": True}
+        return {"name": "ghost", "type": "car", "s0": 200.0 - x, "route": route,
+                "behaviour": {"kind": "scripted", "speed": 10.0}}  # fmt: skip
+
+    poses = [(0.0, 60.0, -1.75), (0.1, 60.0, -3.0)]
+    world = _zone_world([ghost(85.0)])
+    run = SimpleNamespace(world=world, scenario=world.scenario)
+    metric = RuleViolations()
+    metric.start(run)
+    for t, x, y in poses:
+        world.scene.data.time = t
+        world.scene.qpos[0] = (x, y, 0.0)
+        metric.sample(run)
+    values = metric.values(run)
+    assert values["rule_violations"] == ()
+    (entry,) = values["excused_rule_entries"]
+    assert (entry["rule"], entry["line"], entry["excuse"]) == ("shoulder", "right", "evasive")
+    # At x = 120 m the gap is 55.5 m, 5.5 s: a violation.
+    assert [v.rule for v in _judge_poses(_zone_world([ghost(120.0)]), poses)] == ["shoulder"]

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from mujoco_world.scenario.road import DASH_M, GAP_M, build_road, dashes
-from mujoco_world.scenario.spec import RoadSpec, load_scenario, scenario_from_dict
+from mujoco_world.scenario.road import DASH_M, GAP_M, ZONE_LINE_GAP_M, build_road, dashes
+from mujoco_world.scenario.spec import NoOvertakingSpec, RoadSpec, load_scenario, scenario_from_dict
 
 
 def scenario(road=None, ego=None, users=()):
@@ -148,3 +148,12 @@ def test_dashes_cut_a_polyline_by_arc_length():
     np.testing.assert_allclose(parts[1], [[9.0, 0.0], [10.0, 0.0], [10.0, 2.0]])
     np.testing.assert_allclose(parts[2], [[10.0, 8.0], [10.0, 10.0]])
     assert GAP_M == 6.0
+
+
+def test_a_no_overtaking_zone_is_drawn_as_a_double_centre_line():
+    zone = NoOvertakingSpec(start=50.0, end=100.0)
+    marks = build_road(RoadSpec(length=200.0, no_overtaking=(zone,))).lane_markings()
+    assert len(marks.no_overtaking) == 2
+    for line, d in zip(marks.no_overtaking, (-ZONE_LINE_GAP_M, ZONE_LINE_GAP_M), strict=True):
+        assert line[0] == pytest.approx([50.0, d]) and line[-1] == pytest.approx([100.0, d])
+    assert build_road(RoadSpec()).lane_markings().no_overtaking == ()
