@@ -546,7 +546,10 @@ class TrafficRulesConfig:
         shoulder: keep off the shoulders (``RoadEnvironment.lane_edges``): a candidate
             whose footprint moves further beyond an outer lane edge is level 4. The
             validity hierarchy lets a shoulder plan win when every plan in the lanes is
-            invalid or above R_max (to avoid a crash).
+            invalid or above R_max (to avoid a crash). Off by default: switched on, it
+            changed plans across the catalog and turned curve_truck (ethical and
+            selfish) from goal into no_progress, a stall not yet explained; the world
+            still reports every shoulder entry (``RuleViolations``).
         pass_lookahead: how far ahead of the ego's front a slow obstacle releases a
             no-overtaking zone [m].
         marking_margin: the planner keeps this far inside the centre line and the
@@ -562,7 +565,7 @@ class TrafficRulesConfig:
     min_deceleration: float = 0.5
     red_margin: float = 0.5
     no_overtaking: bool = True
-    shoulder: bool = True
+    shoulder: bool = False
     pass_lookahead: float = 40.0
     marking_margin: float = 0.05
     zone_margin: float = 2.0
