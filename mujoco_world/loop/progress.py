@@ -84,7 +84,7 @@ def waiting_at_red(world: World, lookahead: float) -> str | None:
 
 
 def blocked_way(
-    world: World, lookahead: float, margin: float, oncoming_time: float = 0.0, oncoming_speed: float = 0.5
+    world: World, lookahead: float, margin: float, oncoming_time: float = 5.0, oncoming_speed: float = 0.5
 ) -> bool:
     """True if no passage of the ego's width leads ``lookahead`` ahead of its front (module docstring).
 

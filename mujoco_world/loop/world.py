@@ -401,14 +401,18 @@ class World:
             width, offsets = spec.map.lane_width, spec.map.lane_offsets
         else:
             lane = self.scenario.ego.lane
-            if spec.kind is RoadKind.MERGE and lane == 0:
+            on_ramp = spec.kind is RoadKind.MERGE and lane == 0
+            if on_ramp:
                 lane = 1  # its reference path ends in lane 1 (``RoadGeometry.merge_route``)
             width = spec.lane_width
             offsets = tuple((k - lane) * spec.lane_width for k in range(spec.lanes))
-            # Markings relative to the ego's route (its start lane's centre line).
+            # Markings relative to the ego's route (its start lane's centre line). A ramp
+            # ego's route moves from lane 0 to lane 1, so no constant offset places the
+            # edges on it: it gets no shoulder rule (planner) and no shoulder judge (world).
             d_ego = self.road.lane_offset(lane, 1)
             road_edges = self.road.lane_edges()
-            edges = (float(road_edges[0] - d_ego), float(road_edges[-1] - d_ego))
+            if not on_ramp:
+                edges = (float(road_edges[0] - d_ego), float(road_edges[-1] - d_ego))
             if self.road.centre_offset is not None:
                 centre = self.road.centre_offset - d_ego
             zones = tuple(

@@ -336,6 +336,9 @@ def test_an_ego_on_the_ramp_plans_along_the_merged_reference():
     assert y == pytest.approx([-3.5, -3.5, 0.0, 0.0], abs=0.05)  # lane 0's centre, then lane 1's
     env = world.environment()
     assert env.lane_offsets == pytest.approx((-3.5, 0.0, 3.5))  # relative to the merged reference
+    # Edges relative to lane 1 would sit 3.5 m off the route's start in lane 0 (the review
+    # measured (-5.25, 5.25) against the true (-1.75, 8.75)): a ramp ego gets none.
+    assert env.lane_edges is None
 
 
 def test_a_plain_idm_car_stops_at_the_lane_end_a_mobil_car_merges():
