@@ -4,9 +4,14 @@ Definitions follow the paper's reference evaluation (``analyze_risk_dist.py``,
 ``boxplots_risks.py``; SPEC section 8):
 
 * **Groups.** Ego AV; 3rd party = every other road user (the vulnerable ones
-  included, as in the paper: "all other road users except the AV"); VRU = the
-  vulnerable subgroup, pedestrians, cyclists and motorcyclists
-  (``GroupDefinition``; motorcycles can be left out with ``motorcycles=False``).
+  included, as in the paper: "all other road users except the AV", and as its script
+  ``analyze_risk_dist.py``, which adds every obstacle's risk to the 3rd-party list and
+  the VRUs' to the VRU list as well); VRU = the vulnerable subgroup, pedestrians,
+  cyclists and motorcyclists (``GroupDefinition``; motorcycles can be left out with
+  ``motorcycles=False``). Since VRU is a subset of 3rd party, the k-th highest VRU risk
+  never exceeds the k-th highest 3rd-party risk: the paper's "VRUs carry higher risk"
+  can only be judged against the *other* 3rd parties (``OTHERS``: every road user but
+  the ego and the VRUs), which ``vru_against_others`` does; it is not a group of Fig. 5.
 * **Fig. 5** (risk): the 100 highest risk values per group and planner over all
   scenarios, along the executed (chosen) plans. Ego: the chosen plan's ego risk per
   collision partner (R_ego,k, as the reference); 3rd party and VRU: the road users'
@@ -47,7 +52,14 @@ from mujoco_world.loop.summary import OUTCOMES
 
 #: Groups of the paper's Figs. 5 and 6.
 GROUPS = ("ego", "third_party", "vulnerable")
-GROUP_LABELS = {"ego": "Ego AV", "third_party": "3rd party", "vulnerable": "VRU"}
+#: The 3rd parties that are not VRUs (for the claim "VRUs carry higher risk"; not in the figures).
+OTHERS = "other_third_party"
+GROUP_LABELS = {
+    "ego": "Ego AV",
+    "third_party": "3rd party",
+    "vulnerable": "VRU",
+    OTHERS: "3rd party without VRUs",
+}
 #: Values per group and planner in Fig. 5.
 TOP_N = 100
 
@@ -130,8 +142,7 @@ class StudyRun:
         """The run's kept risk values of ``group``."""
         if group == "ego":
             return [v for values in self.ego_risks.values() for v in values]
-        kinds = self.risks.keys() if group == "third_party" else groups.vulnerable & self.risks.keys()
-        return [v for k in kinds for v in self.risks[k]]
+        return [v for k, values in self.risks.items() if _in_group(k, group, groups) for v in values]
 
     def group_harm(self, group: str, groups: GroupDefinition, ego_collisions: bool | None = None) -> float:
         """Summed measured harm of ``group`` (only ego-involved or other collisions if given)."""
@@ -151,7 +162,11 @@ def _in_group(kind: str, group: str, groups: GroupDefinition) -> bool:
         return kind == "ego"
     if group == "third_party":
         return kind != "ego"
-    return kind in groups.vulnerable
+    if group == OTHERS:
+        return kind != "ego" and kind not in groups.vulnerable
+    if group == "vulnerable":
+        return kind in groups.vulnerable
+    raise ValueError(f"unknown group {group!r}; allowed: {', '.join((*GROUPS, OTHERS))}")
 
 
 # --------------------------------------------------------------------------- figures' data
@@ -194,6 +209,21 @@ class GroupSummary:
 
 
 @dataclass(frozen=True, slots=True)
+class VruAgainstOthers:
+    """Fig. 5's VRU risks against those of the 3rd parties that are not VRUs, one planner.
+
+    Attributes:
+        vru, others: median of the group's ``TOP_N`` highest risks (bootstrap interval).
+        difference: vru - others, with a cluster-bootstrap interval over scenarios (nan
+            where a resample lacks either group).
+    """
+
+    vru: Interval
+    others: Interval
+    difference: Interval
+
+
+@dataclass(frozen=True, slots=True)
 class PlannerTable:
     """Runs, outcomes and crash rates of one planner.
 
@@ -224,6 +254,7 @@ class StudyAnalysis:
         planners: in the study's order.
         groups: the VRU definition.
         summaries: (group, planner) -> GroupSummary.
+        vru_against_others: planner -> VRU risks against the other 3rd parties'.
         risk_tests, harm_tests: group -> paired tests (Holm over both families together).
         table: planner -> PlannerTable.
         scenarios: scenarios with at least one run that was not rejected.
@@ -234,6 +265,7 @@ class StudyAnalysis:
     planners: tuple[str, ...]
     groups: GroupDefinition
     summaries: dict[tuple[str, str], GroupSummary]
+    vru_against_others: dict[str, VruAgainstOthers]
     risk_tests: dict[str, list[PairedTest]]
     harm_tests: dict[str, list[PairedTest]]
     table: dict[str, PlannerTable]
@@ -301,12 +333,35 @@ def analyse(
         planners=planners,
         groups=groups,
         summaries=summaries,
+        vru_against_others={
+            p: _vru_against_others([r for r in usable if r.planner == p], groups, resamples, seed)
+            for p in planners
+        },
         risk_tests=risk_tests,
         harm_tests=harm_tests,
         table={p: _table([r for r in runs if r.planner == p]) for p in planners},
         scenarios=tuple(sorted({r.scenario for r in usable})),
         rejected=rejected,
         avoidability_searched=sum(1 for r in usable if r.avoidable is not None),
+    )
+
+
+def _vru_against_others(
+    runs: Sequence[StudyRun], groups: GroupDefinition, resamples: int, seed: int
+) -> VruAgainstOthers:
+    """Median of the top risks of the VRUs and of the other 3rd parties, and their difference."""
+    clusters = [
+        (top_risks(c, "vulnerable", groups), top_risks(c, OTHERS, groups))
+        for c in _by_scenario(runs).values()
+    ]
+
+    def difference(drawn):
+        return _median_of_top([v for v, _ in drawn]) - _median_of_top([o for _, o in drawn])
+
+    return VruAgainstOthers(
+        vru=cluster_bootstrap([v for v, _ in clusters], _median_of_top, resamples, seed),
+        others=cluster_bootstrap([o for _, o in clusters], _median_of_top, resamples, seed),
+        difference=cluster_bootstrap(clusters, difference, resamples, seed),
     )
 
 
@@ -389,6 +444,7 @@ def to_plain_analysis(analysis: StudyAnalysis) -> dict[str, Any]:
             group: {planner: to_plain(analysis.summaries[(group, planner)]) for planner in analysis.planners}
             for group in GROUPS
         },
+        "vru_against_others": {p: to_plain(c) for p, c in analysis.vru_against_others.items()},
         "risk_tests": {g: [to_plain(t) for t in tests] for g, tests in analysis.risk_tests.items()},
         "harm_tests": {g: [to_plain(t) for t in tests] for g, tests in analysis.harm_tests.items()},
         "table": {p: to_plain(t) for p, t in analysis.table.items()},
@@ -398,6 +454,7 @@ def to_plain_analysis(analysis: StudyAnalysis) -> dict[str, Any]:
 __all__ = [
     "GROUPS",
     "GROUP_LABELS",
+    "OTHERS",
     "TOP_N",
     "BodyHarm",
     "GroupDefinition",
@@ -405,6 +462,7 @@ __all__ = [
     "PlannerTable",
     "StudyAnalysis",
     "StudyRun",
+    "VruAgainstOthers",
     "analyse",
     "summed_harm",
     "to_plain_analysis",

@@ -80,3 +80,63 @@ def test_harm_is_split_by_ego_involvement_and_walls_carry_none():
     table = analysis.table["ethical"]
     assert table.ego_crashes == 1 and table.km == pytest.approx(0.1)
     assert table.crashes_per_1000km.value == pytest.approx(10_000.0)
+
+
+def _typed_run(scenario, planner, pedestrian, car, n=20):
+    """A run that kept ``n`` risk values of each type (more than TOP_N over a few scenarios)."""
+    risks = {"car": (car,) * n}
+    if pedestrian is not None:
+        risks["pedestrian"] = (pedestrian,) * n
+    return StudyRun(
+        run_id=f"{scenario}__{planner}__s0",
+        scenario=scenario,
+        planner=planner,
+        seed=0,
+        outcome="goal",
+        reason="",
+        distance=100.0,
+        risks=risks,
+        ego_risks={"car": (0.01,)},
+    )
+
+
+def _claim(analysis, start):
+    return next(v for v in judge(analysis) if v.claim.startswith(start))
+
+
+def test_vrus_are_judged_against_the_other_third_parties_not_against_a_superset():
+    # 8 scenarios x 20 pedestrian values of 0.4 and 20 car values of 0.1 per run (one scenario
+    # without pedestrians): the 100 highest 3rd-party risks are all pedestrians', so 3rd party
+    # and VRU have the same median (0.4) and a VRU-vs-3rd-party comparison can never say
+    # "higher". By hand: VRU median 0.4, non-VRU 3rd parties 0.1, difference +0.3 in every
+    # bootstrap resample -> "higher" for each planner -> supported.
+    planners = ["ethical", "selfish", "standard"]
+    runs = [_typed_run(f"s{k}", p, None if k == 7 else 0.4, 0.1) for k in range(8) for p in planners]
+    analysis = analyse(runs, planners, resamples=200)
+    for p in planners:
+        assert analysis.summaries[("third_party", p)].top_median.value == pytest.approx(0.4)
+        assert analysis.summaries[("vulnerable", p)].top_median.value == pytest.approx(0.4)
+        c = analysis.vru_against_others[p]
+        assert (c.vru.value, c.others.value) == pytest.approx((0.4, 0.1))
+        assert (c.difference.value, c.difference.low, c.difference.high) == pytest.approx((0.3, 0.3, 0.3))
+    claim = _claim(analysis, "VRUs carry higher risk")
+    assert claim.verdict == "supported"
+    assert "3rd party without VRUs 0.1" in claim.evidence
+
+    # Standard's cars carry 0.5 > 0.4: by hand, difference -0.1 there -> "lower" for one
+    # planner of three -> partly supported; every planner lower -> not supported.
+    runs = [_typed_run(f"s{k}", p, 0.4, 0.5 if p == "standard" else 0.1) for k in range(8) for p in planners]
+    analysis = analyse(runs, planners, resamples=200)
+    assert analysis.vru_against_others["standard"].difference.value == pytest.approx(-0.1)
+    assert _claim(analysis, "VRUs carry higher risk").verdict == "partly supported"
+    runs = [_typed_run(f"s{k}", p, 0.4, 0.5) for k in range(8) for p in planners]
+    assert _claim(analyse(runs, planners, resamples=200), "VRUs carry higher risk").verdict == "not supported"
+
+    # No VRU in any scenario: nothing to compare.
+    runs = [_typed_run(f"s{k}", p, None, 0.5) for k in range(8) for p in planners]
+    assert _claim(analyse(runs, planners, resamples=200), "VRUs carry higher risk").verdict == "inconclusive"
+
+
+def test_an_unknown_group_is_refused():
+    with pytest.raises(ValueError, match="unknown group 'cyclists'; allowed: ego, third_party"):
+        top_risks([_run("a", "ethical")], "cyclists", GroupDefinition())
