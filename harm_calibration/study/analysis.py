@@ -22,6 +22,10 @@ Definitions follow the paper's reference evaluation (``analyze_risk_dist.py``,
   road users. Where we differ from the paper: our harm is the CRSS model evaluated at
   the delta-v and impact area the physics measured, not the model's harm at a
   kinematic overlap; summing over repeated contacts counts expected MAIS3+ injuries.
+* **Crash attribution** (``attribution``): each run's crash is the class of its first
+  ego-involved collision; "excluding" figures, tests and rates leave out the ego-involved
+  collisions of runs whose crash is ``struck_from_behind_by_replay`` (a replayed
+  recording, blind to the ego, drove into its rear), which say little about the planner.
 * **Statistics.** Cluster bootstrap over scenarios for each figure's summary (median of
   the top 100 risks; summed harm), Wilcoxon signed-rank tests between planners on
   per-scenario maxima (risk) and sums (harm), rank-biserial effect sizes, Holm over
@@ -40,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from ethical_planner.road_users import RoadUserType
+from harm_calibration.study.attribution import ATTRIBUTIONS, STRUCK_FROM_BEHIND_BY_REPLAY
 from harm_calibration.study.statistics import (
     Interval,
     PairedTest,
@@ -118,6 +123,8 @@ class StudyRun:
         risks: highest road-user risks R_k along the chosen plans, per road-user type.
         ego_risks: highest ego risks R_ego,k, per partner type.
         ego_collided: the ego took part in a collision.
+        crash: class (``attribution.ATTRIBUTIONS``) of the run's first ego-involved
+            collision, None without one.
         harms: measured harm per body and collision.
         avoidable: the avoidability verdict of the run's ego collision, or None.
     """
@@ -135,6 +142,7 @@ class StudyRun:
     risks: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
     ego_risks: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
     ego_collided: bool = False
+    crash: str | None = None
     harms: tuple[BodyHarm, ...] = ()
     avoidable: bool | None = None
 
@@ -144,11 +152,32 @@ class StudyRun:
             return [v for values in self.ego_risks.values() for v in values]
         return [v for k, values in self.risks.items() if _in_group(k, group, groups) for v in values]
 
-    def group_harm(self, group: str, groups: GroupDefinition, ego_collisions: bool | None = None) -> float:
-        """Summed measured harm of ``group`` (only ego-involved or other collisions if given)."""
+    @property
+    def struck_from_behind_by_replay(self) -> bool:
+        """The run's crash is a replayed recording driving into the ego's rear."""
+        return self.crash == STRUCK_FROM_BEHIND_BY_REPLAY
+
+    def group_harm(
+        self,
+        group: str,
+        groups: GroupDefinition,
+        ego_collisions: bool | None = None,
+        excluding: bool = False,
+    ) -> float:
+        """Summed measured harm of ``group``.
+
+        Args:
+            group, groups: which bodies count.
+            ego_collisions: only ego-involved (True) or other (False) collisions; None: all.
+            excluding: leave out the ego-involved collisions if the run's crash is
+                ``struck_from_behind_by_replay``.
+        """
+        skip_ego = excluding and self.struck_from_behind_by_replay
         total = 0.0
         for body in self.harms:
             if ego_collisions is not None and body.ego_collision != ego_collisions:
+                continue
+            if skip_ego and body.ego_collision:
                 continue
             if _in_group(body.kind, group, groups) and math.isfinite(body.harm):
                 total += body.harm
@@ -179,10 +208,14 @@ def top_risks(runs: Iterable[StudyRun], group: str, groups: GroupDefinition, n: 
 
 
 def summed_harm(
-    runs: Iterable[StudyRun], group: str, groups: GroupDefinition, ego: bool | None = None
+    runs: Iterable[StudyRun],
+    group: str,
+    groups: GroupDefinition,
+    ego: bool | None = None,
+    excluding: bool = False,
 ) -> float:
-    """Measured harm of ``group`` summed over ``runs``."""
-    return float(sum(run.group_harm(group, groups, ego) for run in runs))
+    """Measured harm of ``group`` summed over ``runs`` (``StudyRun.group_harm``'s options)."""
+    return float(sum(run.group_harm(group, groups, ego, excluding) for run in runs))
 
 
 @dataclass(frozen=True, slots=True)
@@ -197,6 +230,9 @@ class GroupSummary:
             ego took part.
         harm_avoidable, harm_unavoidable: ego-involved harm by the avoidability
             verdict (0 where no run was searched).
+        harm_excluding: ``harm`` without the ego-involved collisions of runs struck
+            from behind by a replay, with a bootstrap interval.
+        harm_ego_collisions_excluding: ``harm_ego_collisions`` without them.
     """
 
     top: tuple[float, ...]
@@ -206,6 +242,8 @@ class GroupSummary:
     harm_other_collisions: float
     harm_avoidable: float
     harm_unavoidable: float
+    harm_excluding: Interval
+    harm_ego_collisions_excluding: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -234,6 +272,9 @@ class PlannerTable:
         avoidable, unavoidable: of those, with an avoidability verdict.
         km: distance driven [km].
         crashes_per_1000km: ego-involved crashes per 1000 km with an exact interval.
+        crash_classes: ego crashes per class (``attribution.ATTRIBUTIONS``, every class).
+        ego_crashes_excluding: ego crashes not struck from behind by a replay.
+        crashes_per_1000km_excluding: those per 1000 km with an exact interval.
     """
 
     runs: int
@@ -244,6 +285,9 @@ class PlannerTable:
     unavoidable: int
     km: float
     crashes_per_1000km: Interval
+    crash_classes: dict[str, int]
+    ego_crashes_excluding: int
+    crashes_per_1000km_excluding: Interval
 
 
 @dataclass(frozen=True, slots=True)
@@ -255,7 +299,9 @@ class StudyAnalysis:
         groups: the VRU definition.
         summaries: (group, planner) -> GroupSummary.
         vru_against_others: planner -> VRU risks against the other 3rd parties'.
-        risk_tests, harm_tests: group -> paired tests (Holm over both families together).
+        risk_tests, harm_tests: group -> paired tests.
+        harm_tests_excluding: the harm tests without the ego-involved collisions of runs
+            struck from behind by a replay (Holm over the three families together).
         table: planner -> PlannerTable.
         scenarios: scenarios with at least one run that was not rejected.
         rejected: scenario -> rejection reason key.
@@ -268,6 +314,7 @@ class StudyAnalysis:
     vru_against_others: dict[str, VruAgainstOthers]
     risk_tests: dict[str, list[PairedTest]]
     harm_tests: dict[str, list[PairedTest]]
+    harm_tests_excluding: dict[str, list[PairedTest]]
     table: dict[str, PlannerTable]
     scenarios: tuple[str, ...]
     rejected: dict[str, str]
@@ -316,6 +363,7 @@ def analyse(
             # scenarios lies among them) and its summed harm.
             tops = [top_risks(c, group, groups) for c in clusters]
             harms = [summed_harm(c, group, groups) for c in clusters]
+            harms_excluding = [summed_harm(c, group, groups, excluding=True) for c in clusters]
             searched = [r for r in mine if r.avoidable is not None]
             summaries[(group, planner)] = GroupSummary(
                 top=tuple(top_risks(mine, group, groups)),
@@ -327,8 +375,10 @@ def analyse(
                 harm_unavoidable=summed_harm(
                     [r for r in searched if not r.avoidable], group, groups, ego=True
                 ),
+                harm_excluding=cluster_bootstrap(harms_excluding, _total, resamples, seed),
+                harm_ego_collisions_excluding=summed_harm(mine, group, groups, ego=True, excluding=True),
             )
-    risk_tests, harm_tests = _tests(usable, planners, groups)
+    risk_tests, harm_tests, harm_tests_excluding = _tests(usable, planners, groups)
     return StudyAnalysis(
         planners=planners,
         groups=groups,
@@ -339,6 +389,7 @@ def analyse(
         },
         risk_tests=risk_tests,
         harm_tests=harm_tests,
+        harm_tests_excluding=harm_tests_excluding,
         table={p: _table([r for r in runs if r.planner == p]) for p in planners},
         scenarios=tuple(sorted({r.scenario for r in usable})),
         rejected=rejected,
@@ -380,9 +431,11 @@ def _total(values: Sequence[float]) -> float:
 
 def _tests(
     runs: Sequence[StudyRun], planners: tuple[str, ...], groups: GroupDefinition
-) -> tuple[dict[str, list[PairedTest]], dict[str, list[PairedTest]]]:
+) -> tuple[dict[str, list[PairedTest]], dict[str, list[PairedTest]], dict[str, list[PairedTest]]]:
     risk_tests: dict[str, list[PairedTest]] = {}
     harm_tests: dict[str, list[PairedTest]] = {}
+    harm_tests_excluding: dict[str, list[PairedTest]] = {}
+    families = (risk_tests, harm_tests, harm_tests_excluding)
     for group in GROUPS:
 
         def max_risk(run, group=group):
@@ -392,7 +445,10 @@ def _tests(
         def harm(run, group=group):
             return run.group_harm(group, groups)
 
-        for family, value in ((risk_tests, max_risk), (harm_tests, harm)):
+        def harm_excluding(run, group=group):
+            return run.group_harm(group, groups, excluding=True)
+
+        for family, value in zip(families, (max_risk, harm, harm_excluding), strict=True):
             family[group] = []
             per = {p: _per_scenario(runs, p, value) for p in planners}
             for a, b in combinations(planners, 2):
@@ -400,12 +456,12 @@ def _tests(
                 family[group].append(
                     paired_test(a, b, [per[a][s] for s in common], [per[b][s] for s in common])
                 )
-    everything = [t for family in (risk_tests, harm_tests) for tests in family.values() for t in tests]
+    everything = [t for family in families for tests in family.values() for t in tests]
     adjusted = iter(holm([t.p for t in everything]))
-    for family in (risk_tests, harm_tests):
+    for family in families:
         for group, tests in family.items():
             family[group] = [_with_holm(t, next(adjusted)) for t in tests]
-    return risk_tests, harm_tests
+    return risk_tests, harm_tests, harm_tests_excluding
 
 
 def _with_holm(test: PairedTest, p_holm: float) -> PairedTest:
@@ -417,6 +473,7 @@ def _with_holm(test: PairedTest, p_holm: float) -> PairedTest:
 def _table(runs: Sequence[StudyRun]) -> PlannerTable:
     imported = [r for r in runs if r.rejected is None]
     ego = [r for r in imported if r.ego_collided]
+    excluding = [r for r in ego if not r.struck_from_behind_by_replay]
     km = sum(r.distance for r in imported) / 1000.0
     return PlannerTable(
         runs=len(imported),
@@ -427,6 +484,9 @@ def _table(runs: Sequence[StudyRun]) -> PlannerTable:
         unavoidable=sum(1 for r in ego if r.avoidable is False),
         km=km,
         crashes_per_1000km=poisson_rate_ci(len(ego), km, per=1000.0),
+        crash_classes={c: sum(1 for r in ego if r.crash == c) for c in ATTRIBUTIONS},
+        ego_crashes_excluding=len(excluding),
+        crashes_per_1000km_excluding=poisson_rate_ci(len(excluding), km, per=1000.0),
     )
 
 
@@ -447,6 +507,9 @@ def to_plain_analysis(analysis: StudyAnalysis) -> dict[str, Any]:
         "vru_against_others": {p: to_plain(c) for p, c in analysis.vru_against_others.items()},
         "risk_tests": {g: [to_plain(t) for t in tests] for g, tests in analysis.risk_tests.items()},
         "harm_tests": {g: [to_plain(t) for t in tests] for g, tests in analysis.harm_tests.items()},
+        "harm_tests_excluding_struck_from_behind_by_replay": {
+            g: [to_plain(t) for t in tests] for g, tests in analysis.harm_tests_excluding.items()
+        },
         "table": {p: to_plain(t) for p, t in analysis.table.items()},
     }
 

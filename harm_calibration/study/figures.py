@@ -72,9 +72,11 @@ def figure_risks(analysis: StudyAnalysis, out: Path) -> list[Path]:
 
 
 def figure_harm(analysis: StudyAnalysis, out: Path) -> list[Path]:
-    """Fig. 6: measured harm summed over the scenarios per group and planner.
+    """Fig. 6: measured harm summed over the scenarios per group and planner, two panels.
 
-    Each bar stacks harm from ego-involved collisions (split into avoidable and
+    Left, all crashes; right, without the ego-involved collisions of runs a replayed
+    recording drove into from behind (``attribution.STRUCK_FROM_BEHIND_BY_REPLAY``).
+    Each bar stacks harm from ego-involved collisions (left: split into avoidable and
     unavoidable where the avoidability search has run) and from collisions between
     other road users (hatched); the whisker is the cluster-bootstrap interval of the
     total.
@@ -84,17 +86,32 @@ def figure_harm(analysis: StudyAnalysis, out: Path) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    fig, axes = plt.subplots(1, 2, figsize=(12.0, 4.6), sharey=True)
+    _harm_panel(axes[0], analysis, excluding=False)
+    _harm_panel(axes[1], analysis, excluding=True)
+    axes[0].set_title("all crashes", fontsize=11)
+    axes[1].set_title("excluding crashes struck from behind by a replay", fontsize=11)
+    axes[0].set_ylabel("summed measured harm\n(expected MAIS3+ injuries)", fontsize=11)
+    axes[0].legend(fontsize=9)
+    fig.suptitle(f"Fig. 6: harm of the collisions in {len(analysis.scenarios)} scenarios", fontsize=12)
+    paths = _save(fig, out, "fig6_harm")
+    plt.close(fig)
+    return paths
+
+
+def _harm_panel(ax, analysis: StudyAnalysis, excluding: bool) -> None:
     planners = analysis.planners
-    fig, ax = plt.subplots(figsize=(8.0, 4.6))
     width = 0.8 / max(len(planners), 1)
-    searched = analysis.avoidability_searched > 0
+    searched = analysis.avoidability_searched > 0 and not excluding
     for k, planner in enumerate(planners):
         color = _color(planner, k)
         for g, group in enumerate(GROUPS):
             s = analysis.summaries[(group, planner)]
             x = g + (k - (len(planners) - 1) / 2) * width
             bottom = 0.0
-            if searched:
+            if excluding:
+                pieces = [(s.harm_ego_collisions_excluding, color, None)]
+            elif searched:
                 not_searched = max(s.harm_ego_collisions - s.harm_avoidable - s.harm_unavoidable, 0.0)
                 pieces = [
                     (s.harm_unavoidable, color, None),
@@ -108,7 +125,7 @@ def figure_harm(analysis: StudyAnalysis, out: Path) -> list[Path]:
                 if height > 0:
                     ax.bar(x, height, width * 0.9, bottom=bottom, color=face, hatch=hatch, edgecolor=color)
                     bottom += height
-            interval = s.harm
+            interval = s.harm_excluding if excluding else s.harm
             if np.isfinite(interval.low):
                 ax.errorbar(
                     x,
@@ -124,13 +141,7 @@ def figure_harm(analysis: StudyAnalysis, out: Path) -> list[Path]:
         ax.bar(np.nan, 0, color="white", hatch="xx", edgecolor="grey", label="avoidable (ego collisions)")
         ax.bar(np.nan, 0, color="white", hatch="..", edgecolor="grey", label="not searched")
     ax.set_xticks(range(len(GROUPS)), [GROUP_LABELS[g] for g in GROUPS], fontsize=11)
-    ax.set_ylabel("summed measured harm\n(expected MAIS3+ injuries)", fontsize=11)
-    ax.set_title(f"Fig. 6: harm of the collisions in {len(analysis.scenarios)} scenarios", fontsize=11)
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=9)
-    paths = _save(fig, out, "fig6_harm")
-    plt.close(fig)
-    return paths
 
 
 __all__ = ["PLANNER_COLORS", "figure_harm", "figure_risks"]

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from harm_calibration.study.analysis import GROUP_LABELS, GROUPS, OTHERS, OUTCOMES, TOP_N, StudyAnalysis
+from harm_calibration.study.attribution import ATTRIBUTIONS, STRUCK_FROM_BEHIND_BY_REPLAY
 from harm_calibration.study.statistics import Interval, PairedTest
 
 #: Significance level (after Holm's adjustment).
@@ -143,22 +144,26 @@ def judge(analysis: StudyAnalysis) -> list[Verdict]:
             "against 3rd party as a whole cannot come out higher)",
         )
     )
-    # 5. The accidents confirm the risks: standard causes the most harm.
-    harm = analysis.harm_tests
-    looks, lines = [], []
-    for group in GROUPS:
-        for planner in ("ethical", "selfish"):
-            test, sign = _find(harm[group], planner, "standard")
-            looks.append(_lower(test, sign))
-            lines.append(f"{GROUP_LABELS[group]}, {_describe(test, sign, planner, 'standard')}")
-    verdicts.append(
-        Verdict(
-            "The simulated accidents confirm the risk distribution: considering risk lowers the "
-            "harm of every group (Fig. 6).",
-            _tally(looks, "lower"),
-            "; ".join(lines) + " (per-scenario summed measured harm)",
+    # 5. The accidents confirm the risks: standard causes the most harm. Judged on all
+    # crashes and again without the runs a replayed recording drove into from behind.
+    for tests, which in (
+        (analysis.harm_tests, "all crashes"),
+        (analysis.harm_tests_excluding, "excluding crashes struck from behind by a replay"),
+    ):
+        looks, lines = [], []
+        for group in GROUPS:
+            for planner in ("ethical", "selfish"):
+                test, sign = _find(tests[group], planner, "standard")
+                looks.append(_lower(test, sign))
+                lines.append(f"{GROUP_LABELS[group]}, {_describe(test, sign, planner, 'standard')}")
+        verdicts.append(
+            Verdict(
+                "The simulated accidents confirm the risk distribution: considering risk lowers the "
+                f"harm of every group (Fig. 6; {which}).",
+                _tally(looks, "lower"),
+                "; ".join(lines) + " (per-scenario summed measured harm)",
+            )
         )
-    )
     return verdicts
 
 
@@ -181,8 +186,51 @@ def _tally(looks: Sequence[str], wanted: str) -> str:
     return "not supported"
 
 
+def _families(analysis: StudyAnalysis) -> tuple[dict[str, list[PairedTest]], ...]:
+    return (analysis.risk_tests, analysis.harm_tests, analysis.harm_tests_excluding)
+
+
 def _fmt_p(p: float) -> str:
     return "-" if not math.isfinite(p) else f"{p:.3g}"
+
+
+def _runs_section(analysis: StudyAnalysis, rejected_by_reason: dict[str, list[str]]) -> list[str]:
+    """The table of runs, outcomes and crash rates, the crash attribution and the refusals."""
+    out: list[str] = []
+    out += ["", "## Runs, outcomes, crashes", ""]
+    out += [
+        "| planner | runs | "
+        + " | ".join(OUTCOMES)
+        + " | ego crashes | avoidable | unavoidable | km | ego crashes per 1000 km (95 %) "
+        "| ego crashes excl. struck from behind by a replay | per 1000 km (95 %) |",
+        "| --- |" + " --- |" * (len(OUTCOMES) + 8),
+    ]
+    for p, t in analysis.table.items():
+        o = t.outcomes
+        out.append(
+            f"| {p} | {t.runs} | " + " | ".join(str(o[name]) for name in OUTCOMES) + f" | {t.ego_crashes} | "
+            f"{t.avoidable} | {t.unavoidable} | {t.km:.1f} | {t.crashes_per_1000km.text(3)} | "
+            f"{t.ego_crashes_excluding} | {t.crashes_per_1000km_excluding.text(3)} |"
+        )
+    out += [
+        "",
+        "Crash attribution: each run's crash is classified by its first ego-involved collision, from "
+        "the record (the bodies' approach speeds to the contact point, where the ego was hit, and "
+        "whether the other body replays a recording, blind to the ego):",
+        "",
+        "| class | what | " + " | ".join(analysis.planners) + " |",
+        "| --- | --- |" + " --- |" * len(analysis.planners),
+    ]
+    for name, what in ATTRIBUTIONS.items():
+        cells = [str(analysis.table[p].crash_classes.get(name, 0)) for p in analysis.planners]
+        out.append(f"| `{name}` | {what} | " + " | ".join(cells) + " |")
+    if rejected_by_reason:
+        out += ["", "Scenarios refused at import (not counted above):", ""]
+        for reason, names in sorted(rejected_by_reason.items()):
+            out.append(
+                f"- {reason}: {len(names)} ({', '.join(sorted(names)[:8])}{' ...' if len(names) > 8 else ''})"
+            )
+    return out
 
 
 def render(
@@ -201,8 +249,9 @@ def render(
     out += [
         "",
         f"Rule: a difference counts where Holm-adjusted p < {ALPHA} over all "
-        f"{sum(len(t) for f in (analysis.risk_tests, analysis.harm_tests) for t in f.values())} paired tests "
-        f"(Wilcoxon signed-rank on per-scenario maxima of risk and sums of harm); 'similar' needs "
+        f"{sum(len(t) for f in _families(analysis) for t in f.values())} paired tests "
+        f"(Wilcoxon signed-rank on per-scenario maxima of risk and sums of harm, the latter with all "
+        "crashes and excluding those struck from behind by a replay); 'similar' needs "
         f"p >= {ALPHA} and |rank-biserial r| < {SMALL_EFFECT}; fewer than {MIN_PAIRS} scenarios "
         "that differ is inconclusive. r < 0: the first planner is lower.",
         "",
@@ -229,18 +278,22 @@ def render(
     ]
     out += ["", "## Fig. 6: harm", "", "![Fig. 6](fig6_harm.png)", ""]
     out += [
-        "Summed measured harm (expected MAIS3+ injuries; 95 % interval), and its split by whether "
-        "the ego was in the collision:",
+        "Summed measured harm (expected MAIS3+ injuries; 95 % interval), its split by whether "
+        "the ego was in the collision, and the same without the ego collisions of runs a replayed "
+        f"recording drove into from behind (`{STRUCK_FROM_BEHIND_BY_REPLAY}`, the right panel of "
+        "Fig. 6; see the crash attribution below):",
         "",
-        "| group | planner | total | ego collisions | other collisions | avoidable | unavoidable |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
+        "| group | planner | total | ego collisions | other collisions | avoidable | unavoidable "
+        "| total excl. struck from behind by a replay | ego collisions excl. |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for group in GROUPS:
         for p in analysis.planners:
             s = analysis.summaries[(group, p)]
             out.append(
                 f"| {GROUP_LABELS[group]} | {p} | {s.harm.text(3)} | {s.harm_ego_collisions:.3f} | "
-                f"{s.harm_other_collisions:.3f} | {s.harm_avoidable:.3f} | {s.harm_unavoidable:.3f} |"
+                f"{s.harm_other_collisions:.3f} | {s.harm_avoidable:.3f} | {s.harm_unavoidable:.3f} | "
+                f"{s.harm_excluding.text(3)} | {s.harm_ego_collisions_excluding:.3f} |"
             )
     if analysis.avoidability_searched == 0:
         out += ["", "The avoidability search has not run on these runs: no crash is marked avoidable."]
@@ -249,7 +302,7 @@ def render(
         "| family | group | a | b | n | differ | median a - b | r (rank-biserial) | p | p (Holm) |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
-    for family, tests in (("max risk", analysis.risk_tests), ("harm", analysis.harm_tests)):
+    for family, tests in zip(("max risk", "harm", "harm excl."), _families(analysis), strict=True):
         for group in GROUPS:
             for t in tests[group]:
                 out.append(
@@ -257,25 +310,7 @@ def render(
                     f"{t.median_difference:.3g} | {t.rank_biserial:+.2f} | {_fmt_p(t.p)} | "
                     f"{_fmt_p(t.p_holm)} |"
                 )
-    out += ["", "## Runs, outcomes, crashes", ""]
-    out += [
-        "| planner | runs | "
-        + " | ".join(OUTCOMES)
-        + " | ego crashes | avoidable | unavoidable | km | ego crashes per 1000 km (95 %) |",
-        "| --- |" + " --- |" * (len(OUTCOMES) + 6),
-    ]
-    for p, t in analysis.table.items():
-        o = t.outcomes
-        out.append(
-            f"| {p} | {t.runs} | " + " | ".join(str(o[name]) for name in OUTCOMES) + f" | {t.ego_crashes} | "
-            f"{t.avoidable} | {t.unavoidable} | {t.km:.1f} | {t.crashes_per_1000km.text(3)} |"
-        )
-    if rejected_by_reason:
-        out += ["", "Scenarios refused at import (not counted above):", ""]
-        for reason, names in sorted(rejected_by_reason.items()):
-            out.append(
-                f"- {reason}: {len(names)} ({', '.join(sorted(names)[:8])}{' ...' if len(names) > 8 else ''})"
-            )
+    out += _runs_section(analysis, rejected_by_reason)
     out += ["", "## Speed", "", *speed_lines, ""]
     out += ["## Where this study differs from the paper's", "", *notes, ""]
     return "\n".join(out)

@@ -29,8 +29,10 @@ from pathlib import Path
 from typing import Any
 
 from ethical_planner.registry import Registry
+from ethical_planner.road_users import RoadUserType
 from ethical_planner.validation import check
 from harm_calibration.study.analysis import BodyHarm, GroupDefinition, StudyRun, analyse, to_plain_analysis
+from harm_calibration.study.attribution import REPLAY, attribute
 from harm_calibration.study.figures import figure_harm, figure_risks
 from harm_calibration.study.report import render
 from mujoco_world.experiments.batch import (
@@ -181,9 +183,29 @@ def run_tasks(
 # --------------------------------------------------------------------------- records -> study runs
 
 
+def _behaviours(record: RunRecord) -> dict[int, str | None]:
+    """Entity -> how the body moved (``BodyRecord.behaviour``).
+
+    Records written before bodies carried their behaviour (None) are read by the
+    importer's rule: every dynamic obstacle of a CommonRoad file replays its recording,
+    its static obstacles are parked.
+    """
+    s = record.summary
+    commonroad = str(record.scenario_source or "").split("#")[0].endswith(".xml")
+    out: dict[int, str | None] = {}
+    for body in s.bodies:
+        behaviour = body.behaviour
+        if behaviour is None and body.id != 0 and commonroad:
+            behaviour = "parked" if body.type is RoadUserType.PARKED_VEHICLE else REPLAY
+        out[body.id] = behaviour
+    return out
+
+
 def study_run(record: RunRecord) -> StudyRun:
     """What the analysis needs of one run record."""
     s = record.summary
+    ego_collisions = sorted(s.ego_collisions, key=lambda c: c.measurement.time)
+    crash = attribute(ego_collisions[0], _behaviours(record)) if ego_collisions else None
     harms = []
     for impact in s.collisions:
         for body, comparison in ((impact.measurement.a, impact.a), (impact.measurement.b, impact.b)):
@@ -209,6 +231,7 @@ def study_run(record: RunRecord) -> StudyRun:
         risks={k: tuple(v) for k, v in s.top_risks_by_type.items()},
         ego_risks={k: tuple(v) for k, v in s.top_ego_risks_by_type.items()},
         ego_collided=s.ego_collided,
+        crash=crash,
         harms=tuple(harms),
         avoidable=record.avoidability.avoidable if record.avoidability is not None else None,
     )

@@ -105,8 +105,9 @@ def _plan_reference(plan: Plan, t0: float) -> TrajectoryReference:
 def _bodies(world: World) -> tuple[BodyRecord, ...]:
     scene = world.scene
     kinds = (None, *(u.kind for u in world.scenario.road_users))
+    behaviours = (None, *(u.behaviour.kind.value for u in world.scenario.road_users))
     return tuple(
-        BodyRecord(i, b.name, b.type, b.length, b.width, float(scene.masses[i]), kinds[i])
+        BodyRecord(i, b.name, b.type, b.length, b.width, float(scene.masses[i]), kinds[i], behaviours[i])
         for i, b in enumerate(scene.bodies)
     )
 

@@ -36,6 +36,9 @@ class BodyRecord:
             min(length, width)).
         mass: [kg].
         kind: the scenario's finer kind of its type (``child``), or None.
+        behaviour: how the road user moved, its ``BehaviourKind`` value (``recorded``: a
+            replayed recording, blind to the ego; ``idm``, ``scripted``, ``pedestrian``,
+            ``parked``); None for the ego and in records written before this field.
     """
 
     id: int
@@ -45,6 +48,7 @@ class BodyRecord:
     width: float
     mass: float
     kind: str | None = None
+    behaviour: str | None = None
 
     def __post_init__(self) -> None:
         check(

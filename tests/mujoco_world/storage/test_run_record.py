@@ -66,7 +66,7 @@ def test_non_finite_numbers_survive(tmp_path):
     assert back.min_ttc == math.inf and math.isnan(back.min_distance)
 
 
-def test_bodies_carry_the_simulated_shapes_and_masses():
+def test_bodies_carry_the_simulated_shapes_and_masses(tmp_path):
     scenario = dataclasses.replace(get_scenario("pedestrian_behind_parked"), duration=0.2)
     summary = run_scenario(scenario, "standard", seed=0)
     van = next(b for b in summary.bodies if b.name == "parked_van")
@@ -76,6 +76,11 @@ def test_bodies_carry_the_simulated_shapes_and_masses():
         0, "ego", scenario.ego.type, scenario.ego.length, scenario.ego.width, scenario.ego.mass
     )
     assert [b.id for b in summary.bodies] == list(range(len(scenario.road_users) + 1))
+    # How each road user moved (a parked van, a walking pedestrian), read back from the record.
+    assert [b.behaviour for b in summary.bodies] == [None, *(u.behaviour.kind.value for u in scenario.road_users)]
+    assert van.behaviour == "parked"
+    write_record(tmp_path, RunRecord("r", summary))
+    assert read_record(tmp_path).summary.bodies == summary.bodies
 
 
 @pytest.mark.parametrize(
