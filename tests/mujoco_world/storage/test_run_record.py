@@ -77,7 +77,8 @@ def test_bodies_carry_the_simulated_shapes_and_masses(tmp_path):
     )
     assert [b.id for b in summary.bodies] == list(range(len(scenario.road_users) + 1))
     # How each road user moved (a parked van, a walking pedestrian), read back from the record.
-    assert [b.behaviour for b in summary.bodies] == [None, *(u.behaviour.kind.value for u in scenario.road_users)]
+    behaviours = [u.behaviour.kind.value for u in scenario.road_users]
+    assert [b.behaviour for b in summary.bodies] == [None, *behaviours]
     assert van.behaviour == "parked"
     write_record(tmp_path, RunRecord("r", summary))
     assert read_record(tmp_path).summary.bodies == summary.bodies
