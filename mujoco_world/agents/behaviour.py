@@ -33,8 +33,10 @@ from mujoco_world.agents.mobil import (
     IdmParameters,
     LaneLayout,
     MobilDecision,
+    Neighbours,
     lane_neighbours,
-    mobil_step,
+    mobil_accelerations,
+    mobil_decide,
 )
 from mujoco_world.physics.safety import time_to_collision
 from mujoco_world.scenario.recorded_tracks import RecordedTracks
@@ -42,7 +44,6 @@ from mujoco_world.scenario.spec import (
     ActionSpec,
     BehaviourKind,
     ConditionSpec,
-    EgoReaction,
     IdmSpec,
     RoadUserSpec,
 )
@@ -246,9 +247,11 @@ class Fleet:
         self.lanes = lanes
         self.route_lane = np.array([u.route.lane for u in specs], dtype=np.int64)
         self.direction = np.array([u.route.direction for u in specs], dtype=np.int64)
-        #: (k,) bool: idm road users blind to the ego (``ego_reaction = "none"``).
-        self.blind_to_ego = np.array(
-            [u.behaviour.ego_reaction is EgoReaction.NONE for u in specs], dtype=bool
+        #: (k,) reaction level to the ego in [0, 1] (``behaviour.ego_reaction``; 0 for
+        #: road users of other kinds, which are blind to it).
+        self.ego_reaction = np.array(
+            [u.behaviour.ego_reaction if u.behaviour.ego_reaction is not None else 0.0 for u in specs],
+            dtype=float,
         )
         #: (k,) bool: road users that change lanes with MOBIL.
         self.mobil = np.array([u.behaviour.mobil is not None for u in specs], dtype=bool)
@@ -643,50 +646,100 @@ class _IntelligentDriver:
 
     moves = True
 
-    def prepare(self, fleet: Fleet, rows: np.ndarray, view: WorldView) -> dict[int, tuple[float, float]]:
-        out: dict[int, tuple[float, float]] = {}
+    def prepare(self, fleet: Fleet, rows: np.ndarray, view: WorldView) -> dict[int, _Leaders]:
+        out: dict[int, _Leaders] = {}
         mobil = fleet.mobil[rows]
         keep = rows[~mobil]
         if keep.size:
-            gaps, speeds = _leaders(fleet, keep, view)
+            found = _leaders(fleet, keep, view)
             # A lane that ends (merge roads) is a standing obstacle for a road user in it.
             end_gap = fleet.route_lane_end[keep] - fleet.s[keep] - 0.5 * view.length[keep + 1]
             in_lane = np.abs(fleet.d[keep]) < 0.5 * fleet.lane_width
-            end_first = in_lane & (end_gap < gaps)
-            gaps = np.where(end_first, end_gap, gaps)
-            speeds = np.where(end_first, 0.0, speeds)
-            out.update({int(i): (float(g), float(v)) for i, g, v in zip(keep, gaps, speeds, strict=True)})
+            lanes = []
+            for gaps, speeds in found:
+                end_first = in_lane & (end_gap < gaps)
+                lanes += [np.where(end_first, end_gap, gaps), np.where(end_first, 0.0, speeds)]
+            out.update(_leaders_by_row(keep, *lanes))
         if mobil.any():
-            gaps, speeds = _change_lanes(fleet, rows[mobil], view)
-            out.update(
-                {int(i): (float(g), float(v)) for i, g, v in zip(rows[mobil], gaps, speeds, strict=True)}
-            )
+            out.update(_leaders_by_row(rows[mobil], *_change_lanes(fleet, rows[mobil], view)))
         return out
 
     def acceleration(
-        self, fleet: Fleet, i: int, since: float, view: WorldView, context: dict[int, tuple[float, float]]
+        self, fleet: Fleet, i: int, since: float, view: WorldView, context: dict[int, _Leaders]
     ) -> float:
-        gap, v_lead = context[i]
+        """IDM acceleration behind its leader, blended over its reaction level r to the ego.
+
+        ``(1 - r) a_blind + r a_seeing`` (``spec.reaction_level``): r = 0 and r = 1 give
+        exactly the acceleration behind the nearest body other than the ego and behind
+        the nearest body, the ego included; both clipped to the IDM's limits, the blend
+        then delayed by ``idm.reaction_time``.
+        """
+        leaders = context[i]
         p = fleet.specs[i].behaviour.idm
         v = float(fleet.v[i])
         v0 = max(fleet.target_speed(i, since), 0.1)
-        if p.stop_at is not None and view.time < p.stop_until:
-            line_gap = p.stop_at - fleet.s[i] - 0.5 * view.length[i + 1]
-            if line_gap > v * v / (2.0 * p.max_deceleration) - 0.5 and line_gap < gap:
-                gap, v_lead = max(line_gap, 0.0), 0.0
-        free = 1.0 - (v / v0) ** 4
-        if math.isfinite(gap):
-            brake_term = v * (v - v_lead) / (2.0 * math.sqrt(p.max_acceleration * p.comfort_deceleration))
-            s_star = p.min_gap + max(0.0, v * p.time_headway + brake_term)
-            acc = p.max_acceleration * (free - (s_star / max(gap, 0.1)) ** 2)
+        r = float(fleet.ego_reaction[i])
+        if r == 0.0:
+            acc = _idm_behind(p, v, v0, fleet.s[i], view, i, leaders.gap_blind, leaders.speed_blind)
+        elif r == 1.0:
+            acc = _idm_behind(p, v, v0, fleet.s[i], view, i, leaders.gap, leaders.speed)
         else:
-            acc = p.max_acceleration * free
-        acc = float(np.clip(acc, -p.max_deceleration, p.max_acceleration))
+            blind = _idm_behind(p, v, v0, fleet.s[i], view, i, leaders.gap_blind, leaders.speed_blind)
+            seeing = _idm_behind(p, v, v0, fleet.s[i], view, i, leaders.gap, leaders.speed)
+            acc = (1.0 - r) * blind + r * seeing
         queue = fleet.delay[i]
         if queue is not None:
             queue.append(acc)
             acc = queue.popleft()
         return acc
+
+
+@dataclass(frozen=True, slots=True)
+class _Leaders:
+    """An idm road user's leader: seeing the ego (``gap``, ``speed``) and blind to it.
+
+    Attributes:
+        gap: [m] to the nearest body ahead, the ego included (inf: none).
+        speed: its speed along the route [m/s].
+        gap_blind, speed_blind: the same without the ego.
+    """
+
+    gap: float
+    speed: float
+    gap_blind: float
+    speed_blind: float
+
+
+def _leaders_by_row(
+    rows: np.ndarray, gap_blind: np.ndarray, speed_blind: np.ndarray, gap: np.ndarray, speed: np.ndarray
+) -> dict[int, _Leaders]:
+    """``_Leaders`` of road users ``rows`` (m,) from (m,) arrays."""
+    return {
+        int(i): _Leaders(float(g), float(v), float(gb), float(vb))
+        for i, gb, vb, g, v in zip(rows, gap_blind, speed_blind, gap, speed, strict=True)
+    }
+
+
+def _idm_behind(
+    p: IdmSpec, v: float, v0: float, s: float, view: WorldView, i: int, gap: float, v_lead: float
+) -> float:
+    """IDM acceleration [m/s^2] of road user ``i`` at speed ``v`` behind a leader, clipped.
+
+    Its stop line (``idm.stop_at``, while red and still stoppable) replaces the leader
+    when nearer.
+    """
+    if p.stop_at is not None and view.time < p.stop_until:
+        line_gap = p.stop_at - s - 0.5 * view.length[i + 1]
+        if line_gap > v * v / (2.0 * p.max_deceleration) - 0.5 and line_gap < gap:
+            gap, v_lead = max(line_gap, 0.0), 0.0
+    free = 1.0 - (v / v0) ** 4
+    if math.isfinite(gap):
+        brake_term = v * (v - v_lead) / (2.0 * math.sqrt(p.max_acceleration * p.comfort_deceleration))
+        s_star = p.min_gap + max(0.0, v * p.time_headway + brake_term)
+        acc = p.max_acceleration * (free - (s_star / max(gap, 0.1)) ** 2)
+    else:
+        acc = p.max_acceleration * free
+    return float(np.clip(acc, -p.max_deceleration, p.max_acceleration))
 
 
 class _Pedestrian:
@@ -740,16 +793,19 @@ BEHAVIOURS.register(BehaviourKind.PARKED.value, _Parked())
 BEHAVIOURS.register(BehaviourKind.RECORDED.value, _Recorded())
 
 
-def _leaders(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarray, np.ndarray]:
+def _leaders(
+    fleet: Fleet, rows: np.ndarray, view: WorldView
+) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
     """Gap [m] to and speed [m/s] of the nearest body ahead on the routes of ``rows``.
 
     Every other body is projected onto the first ``look_ahead`` metres of each
     route (sampled every metre, refined along the tangent); it leads if it
-    overlaps the route's lane laterally. Vectorised over rows and bodies. A road
-    user blind to the ego (``ego_reaction = "none"``) does not see it.
+    overlaps the route's lane laterally. Vectorised over rows and bodies. Found
+    twice: blind to the ego and seeing it (``Fleet.ego_reaction`` weighs the two).
 
     Returns:
-        (gap, speed), each (m,); inf and 0 where nothing is ahead.
+        ((gap, speed) blind to the ego, (gap, speed) seeing it), each (m,); inf and
+        0 where nothing is ahead.
     """
     m = len(rows)
     horizon = max(fleet.specs[i].behaviour.idm.look_ahead for i in rows)
@@ -781,11 +837,26 @@ def _leaders(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarra
         & (samples[nearest] <= limit[:, None])
     )
     valid[np.arange(m), me] = False
-    valid[:, 0] &= ~fleet.blind_to_ego[rows]
     gap = np.where(valid, gap, np.inf)
+    seeing = _nearest(gap, heading, view.velocity)
+    gap[:, 0] = np.inf
+    return _nearest(gap, heading, view.velocity), seeing
+
+
+def _nearest(gap: np.ndarray, heading: np.ndarray, velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(gap [m], speed along the route [m/s]) of the nearest of n bodies for m road users.
+
+    Args:
+        gap: (m, n) gaps [m] (inf: not a leader). heading: (m, n) route heading at each
+            body [rad]. velocity: (n, 2) [m/s].
+
+    Returns:
+        (gap, speed), each (m,); inf and 0 where no body leads.
+    """
+    m = gap.shape[0]
     j = np.argmin(gap, axis=1)
     best = gap[np.arange(m), j]
-    vel = view.velocity[j]
+    vel = velocity[j]
     hj = heading[np.arange(m), j]
     speed = np.where(np.isfinite(best), vel[:, 0] * np.cos(hj) + vel[:, 1] * np.sin(hj), 0.0)
     return best, speed
@@ -799,19 +870,25 @@ def _followers(types: tuple[RoadUserType, ...]) -> np.ndarray:
     return mask
 
 
-def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarray, np.ndarray]:
+def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.ndarray, ...]:
     """MOBIL for the road users ``rows`` (m,): start the lane changes it decides, return their leaders.
 
     Leaders and followers are read in the lanes the road user occupies and in those on
-    either side (``mobil.lane_neighbours``: the ego is a body like any other,
-    unless the road user is blind to it); a road user that is not changing lane and
-    whose cooldown is over changes if MOBIL says so (``mobil.mobil_step``), with
+    either side (``mobil.lane_neighbours``: the ego is a body like any other); a
+    road user that is not changing lane and whose cooldown is over changes if MOBIL
+    says so (``mobil.mobil_decide``), with
     the scripts' smooth lateral move over ``mobil.duration``. Its IDM leader is the
     nearest one in any lane its footprint occupies: during a change the old and the
     target lane's, after it the target lane's.
 
+    A road user's reaction level r to the ego (``Fleet.ego_reaction``) weighs the
+    accelerations MOBIL compares: ``(1 - r)`` times those blind to the ego plus ``r``
+    times those seeing it (``MobilAccelerations.blend``; neighbours found once if
+    every r is 0 or 1).
+
     Returns:
-        (gap [m], speed [m/s]) of each road user's leader, each (m,); inf and 0: none.
+        (gap_blind, speed_blind, gap, speed): each road user's leader blind to the ego
+        and seeing it [m, m/s], each (m,); inf and 0: none.
     """
     t = view.time
     m = rows.size
@@ -823,8 +900,9 @@ def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.n
     x, y, theta, _ = fleet.routes.lookup(rows[:, None], s_abs)
     s_rel = s_abs - fleet.s[rows, None]
     n = view.position.shape[0]
+    weight = fleet.ego_reaction[rows]
     sees = np.ones((m, n), dtype=bool)
-    sees[:, 0] = ~fleet.blind_to_ego[rows]
+    sees[:, 0] = weight > 0.0
     can_follow = _followers(view.types)
     current = np.rint(fleet.d[rows] / w).astype(np.int64)
     lane = fleet.route_lane[rows, None] + current[:, None] + SIDES[None, :]
@@ -842,6 +920,14 @@ def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.n
         view.position, view.velocity, view.yaw, view.length, view.width,
         can_follow, sees, end_gap,
     )  # fmt: skip
+    partial = bool(np.any((weight > 0.0) & (weight < 1.0)))
+    if partial:
+        sees[:, 0] = False
+        nb_blind = lane_neighbours(
+            x, y, theta, s_rel, me, fleet.d[rows], w,
+            view.position, view.velocity, view.yaw, view.length, view.width,
+            can_follow, sees, end_gap,
+        )  # fmt: skip
     params = fleet._mobil_params
     p = {name: values[rows] for name, values in params.items()}
     v = fleet.v[rows]
@@ -852,8 +938,11 @@ def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.n
     speeds = np.hypot(view.velocity[:, 0], view.velocity[:, 1])
     idm = fleet.idm_parameters(speeds, v0, rows)
     ready = (t >= fleet.mobil_busy_until[rows]) & np.isfinite(since) & fleet.active[rows]
-    decision = mobil_step(nb, me, v, idm, allowed, p["politeness"], p["threshold"], p["b_safe"],
-                          p["bias_right"], ready)  # fmt: skip
+    accelerations = mobil_accelerations(nb, me, v, idm)
+    if partial:
+        accelerations = mobil_accelerations(nb_blind, me, v, idm).blend(accelerations, weight)
+    decision = mobil_decide(accelerations, allowed, p["politeness"], p["threshold"], p["b_safe"],
+                            p["bias_right"], ready)  # fmt: skip
     fleet.last_mobil = decision
     for r in np.flatnonzero(decision.change):
         i = int(rows[r])
@@ -868,6 +957,13 @@ def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.n
     changing = decision.change != 0
     occupied = nb.occupied.copy()
     occupied[changing, 1 + decision.change[changing]] = True
+    seeing = _lane_leader(nb, occupied)
+    return (*(_lane_leader(nb_blind, occupied) if partial else seeing), *seeing)
+
+
+def _lane_leader(nb: Neighbours, occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(gap [m], speed [m/s]) of the nearest leader in the lanes ``occupied`` (m, 3), each (m,)."""
+    m = occupied.shape[0]
     gaps = np.where(occupied, nb.lead_gap, np.inf)
     k = np.argmin(gaps, axis=1)
     gap = gaps[np.arange(m), k]

@@ -297,6 +297,50 @@ class MobilDecision:
     change: np.ndarray
 
 
+@dataclass(frozen=True, slots=True)
+class MobilAccelerations:
+    """The IDM accelerations MOBIL weighs for m road users, each (m, 3) over ``SIDES``.
+
+    Attributes:
+        own: the road user's own in each lane (the middle column: a_c, the others a~_c).
+        follower_now: each lane's follower behind the lane's leader (a_n; in the own
+            lane a~_o, the old follower after the road user has left).
+        follower_behind_me: each lane's follower behind the road user (a~_n; in the own
+            lane a_o).
+    """
+
+    own: np.ndarray
+    follower_now: np.ndarray
+    follower_behind_me: np.ndarray
+
+    def blend(self, seeing: MobilAccelerations, weight: np.ndarray) -> MobilAccelerations:
+        """``(1 - w) self + w seeing`` row by row (``weight`` (m,) in [0, 1]; 0 and 1 exact)."""
+        w = weight[:, None]
+        return MobilAccelerations(
+            *((1.0 - w) * a + w * b for a, b in ((self.own, seeing.own),
+              (self.follower_now, seeing.follower_now),
+              (self.follower_behind_me, seeing.follower_behind_me)))
+        )  # fmt: skip
+
+
+def mobil_accelerations(
+    nb: Neighbours, me: np.ndarray, v: np.ndarray, idm: IdmParameters
+) -> MobilAccelerations:
+    """The IDM accelerations of m road users and of their followers, in lanes ``current + SIDES``.
+
+    Args:
+        nb: leaders and followers (``lane_neighbours``).
+        me: (m,) body indices. v: (m,) their speeds [m/s].
+        idm: IDM parameters of every body (the followers' accelerations use theirs).
+    """
+    f = nb.follow
+    return MobilAccelerations(
+        own=idm.acceleration(me[:, None], v[:, None], nb.lead_gap, nb.lead_speed),
+        follower_now=idm.acceleration(f, nb.follow_speed, nb.follow_lead_gap, nb.lead_speed),
+        follower_behind_me=idm.acceleration(f, nb.follow_speed, nb.follow_gap, v[:, None]),
+    )
+
+
 def mobil_step(
     nb: Neighbours,
     me: np.ndarray,
@@ -323,10 +367,26 @@ def mobil_step(
     Returns:
         The decision; the larger incentive wins if both sides qualify.
     """
-    own = idm.acceleration(me[:, None], v[:, None], nb.lead_gap, nb.lead_speed)  # (m, 3): me in lane k
-    f = nb.follow
-    follower_now = idm.acceleration(f, nb.follow_speed, nb.follow_lead_gap, nb.lead_speed)
-    follower_behind_me = idm.acceleration(f, nb.follow_speed, nb.follow_gap, v[:, None])
+    accelerations = mobil_accelerations(nb, me, v, idm)
+    return mobil_decide(accelerations, allowed, politeness, threshold, b_safe, bias_right, ready)
+
+
+def mobil_decide(
+    acc: MobilAccelerations,
+    allowed: np.ndarray,
+    politeness: np.ndarray,
+    threshold: np.ndarray,
+    b_safe: np.ndarray,
+    bias_right: np.ndarray,
+    ready: np.ndarray,
+) -> MobilDecision:
+    """MOBIL's decision for m road users from the accelerations it weighs (``mobil_step``'s second half).
+
+    Args:
+        acc: the accelerations (``mobil_accelerations``, or a blend of two).
+        allowed, politeness, threshold, b_safe, bias_right, ready: as ``mobil_step``.
+    """
+    own, follower_now, follower_behind_me = acc.own, acc.follower_now, acc.follower_behind_me
     a_c = own[:, 1:2]
     # New follower (target lane): before it follows the lane's leader, after it follows me.
     # Old follower (my lane): before it follows me, after my leader.
@@ -348,7 +408,7 @@ def mobil_step(
     qualifies = safe & allowed & (incentive > threshold[:, None]) & ready[:, None]
     score = np.where(qualifies, incentive, -np.inf)
     best = np.argmax(score, axis=1)
-    change = np.where(np.isfinite(score[np.arange(me.size), best]), SIDES[best], 0)
+    change = np.where(np.isfinite(score[np.arange(own.shape[0]), best]), SIDES[best], 0)
     return MobilDecision(incentive=incentive, safe=safe, change=change)
 
 

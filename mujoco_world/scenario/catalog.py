@@ -76,7 +76,7 @@ def _scripted(speed: float, **kw) -> BehaviourSpec:
     return BehaviourSpec(kind="scripted", speed=speed, **kw)
 
 
-def _mobil(speed: float, ego_reaction: str = "idm", **params: float) -> BehaviourSpec:
+def _mobil(speed: float, ego_reaction: str | float = "idm", **params: float) -> BehaviourSpec:
     """An idm road user that changes lanes with MOBIL (default parameters unless given)."""
     return BehaviourSpec(kind="idm", speed=speed, mobil=MobilSpec(**params), ego_reaction=ego_reaction)
 
@@ -884,6 +884,52 @@ def cut_in_blind(rng: np.random.Generator | None = None) -> Scenario:
     return _cut_in("cut_in_blind", "none", rng)
 
 
+def follower_brakes_weakly(rng: np.random.Generator | None = None) -> Scenario:
+    """The car ahead brakes hard on a one-lane road; the car behind the ego reacts to it weakly.
+
+    "What if the other driver brakes too?": the follower is an idm car with
+    ``ego_reaction = 0.5`` (it brakes for the ego half as hard as an attentive driver
+    would) and a 0.8 s reaction time, 16 m behind the ego on a one-lane one-way road
+    between walls: the ego can only brake. [expect] the ego touches nobody. Measured
+    (seed 0): ethical and selfish stop behind the lead (``stopped_safely``); standard
+    brakes too late, scrapes the wall and hits the lead (mujoco_world/README.md).
+    """
+    draw = _Draw(rng)
+    speed = draw(14.0, 12.0, 15.0)
+    lead = _user(
+        "lead",
+        "car",
+        RouteSpec(lane=0),
+        30.0 + draw(22.0, 19.0, 26.0),
+        _scripted(
+            speed,
+            start_time=draw(2.0, 1.5, 3.0),
+            speed_profile=((0.0, speed), (speed / draw(6.5, 6.0, 7.0), 0.0)),
+        ),
+    )
+    follower = _user(
+        "follower",
+        "car",
+        RouteSpec(lane=0),
+        30.0 - draw(20.5, 18.5, 23.0),
+        BehaviourSpec(
+            kind="idm",
+            speed=speed,
+            ego_reaction=draw(0.5, 0.3, 0.7),
+            idm=IdmSpec(reaction_time=draw(0.8, 0.6, 1.0)),
+        ),
+    )
+    return Scenario(
+        name="follower_brakes_weakly",
+        description="the car ahead brakes hard; the car behind reacts to the ego late and weakly",
+        road=RoadSpec(length=200.0, lanes=1, lanes_forward=1, speed_limit=16.7, boundary="wall"),
+        ego=EgoSpec(s0=30.0, speed=speed, goal_s=180.0),
+        road_users=(lead, follower),
+        duration=12.0,
+        expect=ExpectSpec(ego_collision=False),
+    )
+
+
 @dataclass(frozen=True, slots=True)
 class ScenarioFamily:
     """A named scenario family.
@@ -920,6 +966,7 @@ _FAMILIES = (
     cut_in_blind,
     no_overtaking_zone,
     stop_sign,
+    follower_brakes_weakly,
 )
 
 #: Name -> family, in catalog order.

@@ -86,6 +86,7 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "behaviour.trigger_distance": (0.1, 1000.0, "m"),
     "behaviour.speed_profile": (0.0, 70.0, "m/s"),
     "behaviour.lateral": (-20.0, 20.0, "m"),
+    "behaviour.ego_reaction": (0.0, 1.0, "-"),
     "when.time": (0.0, 3600.0, "s"),
     "when.delay": (0.0, 3600.0, "s"),
     "when.distance_below": (0.1, 1000.0, "m"),
@@ -548,17 +549,47 @@ class IdmSpec:
 
 
 class EgoReaction(StrEnum):
-    """How an idm road user reacts to the ego.
+    """Named levels of an idm road user's reaction to the ego (``behaviour.ego_reaction``).
 
-    none: blind to the ego (a scripted hazard): it neither follows nor brakes for it,
-        and its lane changes ignore it.
-    idm: the ego is a vehicle like any other: followed and braked for as a leader,
-        and counted as leader and follower by MOBIL (its safety criterion protects the
-        ego when it would be the new follower).
+    none: level 0, blind to the ego (a scripted hazard): it neither follows nor brakes
+        for it, and its lane changes ignore it.
+    idm: level 1, the ego is a vehicle like any other: followed and braked for as a
+        leader, and counted as leader and follower by MOBIL (its safety criterion
+        protects the ego when it would be the new follower).
     """
 
     NONE = "none"
     IDM = "idm"
+
+    @property
+    def level(self) -> float:
+        """The reaction level of the name (0 or 1)."""
+        return 0.0 if self is EgoReaction.NONE else 1.0
+
+
+def reaction_level(value: Any) -> float:
+    """``behaviour.ego_reaction`` as a level in [0, 1]: a number, or ``"none"`` (0) / ``"idm"`` (1).
+
+    The level r weighs the ego in the road user's decisions: its acceleration (and each
+    acceleration MOBIL weighs) is ``(1 - r) a_blind + r a_seeing``, the convex blend of
+    what it would do blind to the ego and seeing it as a vehicle like any other (the
+    form of the enhanced IDM's coolness factor, Kesting, Treiber, Helbing 2010).
+    Between the ends it reacts weakly: it brakes for the ego ahead r times as much as
+    an attentive driver would beyond what it does anyway (``mujoco_world/README.md``).
+
+    Raises:
+        ValueError: naming ``behaviour.ego_reaction``: an unknown name, a non-number or
+            a level outside [0, 1].
+    """
+    if isinstance(value, str | EgoReaction):
+        return parse_enum(EgoReaction, value, "ego reaction", "behaviour.ego_reaction").level
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(
+            f"behaviour.ego_reaction must be a level in [0, 1] or one of none, idm, got {value!r}"
+        )
+    level = float(value)
+    check(math.isfinite(level), f"behaviour.ego_reaction must be finite, got {value!r}")
+    return level
 
 
 @dataclass(frozen=True, slots=True)
@@ -802,7 +833,10 @@ class BehaviourSpec:
         trajectory: the recording to follow (kind recorded only, required there).
         events: a script of triggered actions, run in order (``EventSpec``).
         mobil: reactive lane changes (kind idm only; None: it keeps its lane).
-        ego_reaction: how it reacts to the ego (kind idm only; default ``idm``).
+        ego_reaction: how much it reacts to the ego, a level in [0, 1] (kind idm
+            only; default 1): 0 blind to it, 1 the ego is a vehicle like any other,
+            between a convex blend of both (``reaction_level``). The names ``"none"``
+            and ``"idm"`` stand for 0 and 1.
     """
 
     kind: BehaviourKind = BehaviourKind.SCRIPTED
@@ -816,10 +850,12 @@ class BehaviourSpec:
     trajectory: RecordedTrajectory | None = None
     events: tuple[EventSpec, ...] = ()
     mobil: MobilSpec | None = None
-    ego_reaction: EgoReaction | None = None
+    ego_reaction: float | str | None = None
 
     def __post_init__(self) -> None:
         kind = parse_enum(BehaviourKind, self.kind, "behaviour kind", "behaviour.kind")
+        if self.ego_reaction is not None:
+            object.__setattr__(self, "ego_reaction", reaction_level(self.ego_reaction))
         check(
             (self.trajectory is not None) == (kind is BehaviourKind.RECORDED),
             "behaviour.trajectory is required with kind 'recorded' and allowed only with it",
@@ -839,12 +875,8 @@ class BehaviourSpec:
         if kind is BehaviourKind.IDM:
             if self.idm is None:
                 object.__setattr__(self, "idm", IdmSpec())
-            reaction = EgoReaction.IDM if self.ego_reaction is None else self.ego_reaction
-            object.__setattr__(
-                self,
-                "ego_reaction",
-                parse_enum(EgoReaction, reaction, "ego reaction", "behaviour.ego_reaction"),
-            )
+            if self.ego_reaction is None:
+                object.__setattr__(self, "ego_reaction", EgoReaction.IDM.level)
         else:
             check(self.idm is None, f"behaviour.idm is only allowed with kind 'idm', not {kind.value!r}")
             check(
