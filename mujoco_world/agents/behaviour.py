@@ -260,6 +260,10 @@ class Fleet:
             name: np.array([getattr(p, name) if p is not None else 0.0 for p in mobil])
             for name in ("politeness", "threshold", "b_safe", "bias_right", "duration", "cooldown")
         }
+        # v_crit of the passing rule (``mobil.no_passing_right``); inf: the rule is off.
+        self._mobil_params["pass_right_below"] = np.array(
+            [p.pass_right_below if p is not None and p.no_passing_right else math.inf for p in mobil]
+        )
         #: (k,) time before which a MOBIL road user does not decide (changing lane, cooldown) [s].
         self.mobil_busy_until = np.full(self.k, -math.inf)
         #: Lane changes MOBIL made: (time [s], road user index, from lane, to lane), lanes
@@ -915,6 +919,7 @@ def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.n
     else:
         end_gap = np.full((m, 3), np.inf)
         allowed = np.ones((m, 3), dtype=bool)
+    left_runs = allowed[:, 2].copy()
     nb = lane_neighbours(
         x, y, theta, s_rel, me, fleet.d[rows], w,
         view.position, view.velocity, view.yaw, view.length, view.width,
@@ -938,9 +943,11 @@ def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.n
     speeds = np.hypot(view.velocity[:, 0], view.velocity[:, 1])
     idm = fleet.idm_parameters(speeds, v0, rows)
     ready = (t >= fleet.mobil_busy_until[rows]) & np.isfinite(since) & fleet.active[rows]
-    accelerations = mobil_accelerations(nb, me, v, idm)
+    v_crit = p["pass_right_below"]
+    rule = (left_runs, v_crit) if np.isfinite(v_crit).any() else (None, None)
+    accelerations = mobil_accelerations(nb, me, v, idm, *rule)
     if partial:
-        accelerations = mobil_accelerations(nb_blind, me, v, idm).blend(accelerations, weight)
+        accelerations = mobil_accelerations(nb_blind, me, v, idm, *rule).blend(accelerations, weight)
     decision = mobil_decide(accelerations, allowed, p["politeness"], p["threshold"], p["b_safe"],
                             p["bias_right"], ready)  # fmt: skip
     fleet.last_mobil = decision
@@ -957,17 +964,37 @@ def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.n
     changing = decision.change != 0
     occupied = nb.occupied.copy()
     occupied[changing, 1 + decision.change[changing]] = True
-    seeing = _lane_leader(nb, occupied)
-    return (*(_lane_leader(nb_blind, occupied) if partial else seeing), *seeing)
+    passing_rule = (idm, me, v, left_runs, v_crit) if rule[0] is not None else None
+    seeing = _lane_leader(nb, occupied, passing_rule)
+    return (*(_lane_leader(nb_blind, occupied, passing_rule) if partial else seeing), *seeing)
 
 
-def _lane_leader(nb: Neighbours, occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(gap [m], speed [m/s]) of the nearest leader in the lanes ``occupied`` (m, 3), each (m,)."""
+def _lane_leader(
+    nb: Neighbours, occupied: np.ndarray, passing_rule: tuple | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(gap [m], speed [m/s]) of the leader m road users follow, each (m,).
+
+    The nearest leader in the lanes ``occupied`` (m, 3); under the European passing rule
+    (``passing_rule``: IDM parameters, body indices, speeds, whether the lane to the left
+    runs its way, v_crit) the left lane's leader instead where it moves faster than
+    v_crit and following it gives the lower IDM acceleration (``mobil.no_passing_on_the_right``).
+    """
     m = occupied.shape[0]
+    rows = np.arange(m)
     gaps = np.where(occupied, nb.lead_gap, np.inf)
     k = np.argmin(gaps, axis=1)
-    gap = gaps[np.arange(m), k]
-    return gap, np.where(np.isfinite(gap), nb.lead_speed[np.arange(m), k], 0.0)
+    gap = gaps[rows, k]
+    speed = np.where(np.isfinite(gap), nb.lead_speed[rows, k], 0.0)
+    if passing_rule is None:
+        return gap, speed
+    idm, me, v, left_runs, v_crit = passing_rule
+    left_gap, left_speed = nb.lead_gap[:, 2], nb.lead_speed[:, 2]
+    binds = (
+        left_runs
+        & (left_speed > v_crit)
+        & (idm.acceleration(me, v, left_gap, left_speed) < idm.acceleration(me, v, gap, speed))
+    )
+    return np.where(binds, left_gap, gap), np.where(binds, left_speed, speed)
 
 
 def _gap_clear(i: int, view: WorldView, gap_time: float, corridor: float) -> bool:

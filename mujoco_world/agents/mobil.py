@@ -323,8 +323,42 @@ class MobilAccelerations:
         )  # fmt: skip
 
 
+def no_passing_on_the_right(
+    own: np.ndarray, lead_speed: np.ndarray, left_runs: np.ndarray, pass_right_below: np.ndarray
+) -> np.ndarray:
+    """The European passing rule: a lane's acceleration at most the one behind the left lane's leader.
+
+    MOBIL's asymmetric variant (Kesting, Treiber, Helbing 2007): a vehicle must not pass
+    a vehicle in the lane to its left, except in congestion, so its acceleration in a
+    lane is ``min(a, a_left)``, ``a_left`` its acceleration behind the leader of the lane
+    to the left, while that leader moves faster than ``pass_right_below`` (v_crit). A
+    lane without a leader, a lane end (speed 0) and a leader in congestion do not limit.
+
+    Args:
+        own: (m, 3) the road user's acceleration in lanes ``current + SIDES`` [m/s^2].
+        lead_speed: (m, 3) the leaders' speeds in those lanes [m/s] (0: none).
+        left_runs: (m,) bool, the lane left of the current one runs the road user's way.
+        pass_right_below: (m,) v_crit [m/s] (inf: the rule is off for that row).
+
+    Returns:
+        (m, 3) the accelerations under the rule. The current lane is limited by the left
+        lane's leader, the lane to the right by the current lane's; the left lane's own
+        left neighbour is not looked at.
+    """
+    flowing = lead_speed > pass_right_below[:, None]
+    limited = own.copy()
+    limited[:, 0] = np.where(flowing[:, 1], np.minimum(own[:, 0], own[:, 1]), own[:, 0])
+    limited[:, 1] = np.where(flowing[:, 2] & left_runs, np.minimum(own[:, 1], own[:, 2]), own[:, 1])
+    return limited
+
+
 def mobil_accelerations(
-    nb: Neighbours, me: np.ndarray, v: np.ndarray, idm: IdmParameters
+    nb: Neighbours,
+    me: np.ndarray,
+    v: np.ndarray,
+    idm: IdmParameters,
+    left_runs: np.ndarray | None = None,
+    pass_right_below: np.ndarray | None = None,
 ) -> MobilAccelerations:
     """The IDM accelerations of m road users and of their followers, in lanes ``current + SIDES``.
 
@@ -332,10 +366,16 @@ def mobil_accelerations(
         nb: leaders and followers (``lane_neighbours``).
         me: (m,) body indices. v: (m,) their speeds [m/s].
         idm: IDM parameters of every body (the followers' accelerations use theirs).
+        left_runs, pass_right_below: (m,) the European passing rule
+            (``no_passing_on_the_right``) for the road users' own accelerations; None:
+            off for all.
     """
     f = nb.follow
+    own = idm.acceleration(me[:, None], v[:, None], nb.lead_gap, nb.lead_speed)
+    if pass_right_below is not None:
+        own = no_passing_on_the_right(own, nb.lead_speed, left_runs, pass_right_below)
     return MobilAccelerations(
-        own=idm.acceleration(me[:, None], v[:, None], nb.lead_gap, nb.lead_speed),
+        own=own,
         follower_now=idm.acceleration(f, nb.follow_speed, nb.follow_lead_gap, nb.lead_speed),
         follower_behind_me=idm.acceleration(f, nb.follow_speed, nb.follow_gap, v[:, None]),
     )

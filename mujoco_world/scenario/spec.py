@@ -78,6 +78,7 @@ RANGES: dict[str, tuple[float, float, str]] = {
     "mobil.bias_right": (0.0, 5.0, "m/s^2"),
     "mobil.duration": (1.0, 15.0, "s"),
     "mobil.cooldown": (0.0, 60.0, "s"),
+    "mobil.pass_right_below": (0.0, 70.0, "m/s"),
     "crossing.wait_at": (0.0, 20000.0, "m"),
     "crossing.gap_time": (0.0, 60.0, "s"),
     "crossing.corridor": (0.5, 100.0, "m"),
@@ -610,6 +611,12 @@ class MobilSpec:
         bias_right: keep-right bias Delta a_bias [m/s^2].
         duration: time of the lateral move [s].
         cooldown: time after a lane change ends before the next decision [s].
+        no_passing_right: the European passing rule of MOBIL's asymmetric variant:
+            its acceleration in a lane is at most the one behind the leader of the lane
+            to its left, while that leader moves faster than ``pass_right_below``
+            (``agents.mobil.no_passing_on_the_right``), in its decisions and its motion.
+        pass_right_below: below this speed of the left lane's leader (congestion)
+            passing on the right is allowed [m/s] (60 km/h, Kesting et al.'s v_crit).
     """
 
     politeness: float = 0.3
@@ -618,6 +625,8 @@ class MobilSpec:
     bias_right: float = 0.2
     duration: float = 4.0
     cooldown: float = 2.0
+    no_passing_right: bool = False
+    pass_right_below: float = 60.0 / 3.6
 
     def __post_init__(self) -> None:
         check_finite(
@@ -628,6 +637,11 @@ class MobilSpec:
             bias_right=self.bias_right,
             duration=self.duration,
             cooldown=self.cooldown,
+            pass_right_below=self.pass_right_below,
+        )
+        check(
+            isinstance(self.no_passing_right, bool),
+            f"mobil.no_passing_right must be true or false, got {self.no_passing_right!r}",
         )
         check_plausible("mobil", self)
 
