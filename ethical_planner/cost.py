@@ -166,6 +166,38 @@ def path_deviation(
     return np.abs(d - centres[lane]).mean(axis=1), lanes_away.mean(axis=1)
 
 
+def comfort_and_mobility(
+    jerk_lon: np.ndarray,
+    jerk_lat: np.ndarray,
+    speed_deviation: np.ndarray,
+    lateral_deviation: np.ndarray,
+    lanes_away: np.ndarray,
+    weights: CostWeights,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The risk-free parts of Eq. 5: comfort and mobility costs, shape (n,) each.
+
+    Args: as ``total_cost``.
+    """
+    comfort = weights.jerk_lon * jerk_lon + weights.jerk_lat * jerk_lat
+    mobility = (
+        weights.speed * speed_deviation
+        + weights.path_distance * lateral_deviation
+        + weights.other_lane * lanes_away
+    )
+    return comfort, mobility
+
+
+def eq5_cost(
+    j_risk: np.ndarray, comfort: np.ndarray, mobility: np.ndarray, weights: CostWeights
+) -> np.ndarray:
+    """J_total of Eq. 5, w_risk J_risk + comfort + mobility, shape (n,).
+
+    Every operation rounds monotonically, so with ``j_risk`` = 0 this is a lower bound,
+    in floating point too, of the cost of any J_risk >= 0 (the planner's branch and bound).
+    """
+    return weights.risk * j_risk + comfort + mobility
+
+
 def total_cost(
     risks: np.ndarray,
     present: np.ndarray,
@@ -210,12 +242,9 @@ def total_cost(
         - weights.responsibility * weights.bayes * j_r
         + weights.ego_risk * ego_combined
     )
-    comfort = weights.jerk_lon * jerk_lon + weights.jerk_lat * jerk_lat
-    mobility = (
-        weights.speed * speed_deviation
-        + weights.path_distance * lateral_deviation
-        + weights.other_lane * lanes_away
+    comfort, mobility = comfort_and_mobility(
+        jerk_lon, jerk_lat, speed_deviation, lateral_deviation, lanes_away, weights
     )
     valid = levels == Validity.VALID
-    total = np.where(valid, weights.risk * j_risk + comfort + mobility, j_risk)
+    total = np.where(valid, eq5_cost(j_risk, comfort, mobility, weights), j_risk)
     return CostBreakdown(j_b, j_e, j_m, j_r, ego_combined, j_risk, comfort, mobility, total)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -17,7 +17,15 @@ import numpy as np
 
 from ethical_planner.collision_probability import collides
 from ethical_planner.config import PlannerConfig
-from ethical_planner.cost import CostBreakdown, path_deviation, responsibility, risk_set, total_cost
+from ethical_planner.cost import (
+    CostBreakdown,
+    comfort_and_mobility,
+    eq5_cost,
+    path_deviation,
+    responsibility,
+    risk_set,
+    total_cost,
+)
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.prediction import Prediction, Predictor, make_predictor
 from ethical_planner.responsibility import LegalCorridors, collision_onset, responsibilities
@@ -48,7 +56,7 @@ from ethical_planner.traffic_rules import (
     stood_at,
     stop_targets,
 )
-from ethical_planner.validity import Validity, physically_invalid, validity_levels
+from ethical_planner.validity import UNASSESSED, Validity, physically_invalid, validity_levels
 from ethical_planner.workers import Workers
 
 
@@ -135,7 +143,9 @@ class Decision:
         max_risk_refused: candidates above R_max (level 3) that Eq. 5 would have
             preferred to the chosen valid plan: R_max decided this cycle if > 0.
         level: validity level of the chosen plan.
-        level_counts: candidates per validity level.
+        level_counts: candidates per validity level; key ``UNASSESSED`` (-1): candidates
+            whose risk was not evaluated because their Eq. 5 cost at zero risk is above
+            the chosen plan's (valid or above R_max: unknown, never counted as either).
         invalid_counts: physically invalid candidates per broken limit (a candidate
             may break several).
         terminal_unsafe: candidates within the physical limits that end in oncoming
@@ -146,7 +156,10 @@ class Decision:
             does). Costs need risk, which is evaluated only for the candidates of the
             highest level the integral-free tests leave possible (``_Evaluation``):
             levels below it (physically invalid, collision, leaves the road when a
-            better one exists) have no entry.
+            better one exists) have no entry. When candidates were left unassessed
+            (``level_counts[UNASSESSED]``), the levels they may be at have no entry
+            (above R_max, and breaks a traffic rule if one of them does), except the
+            valid level, whose cheapest candidate is exact.
         reason: why this candidate.
         emergency: True if the emergency-braking fallback was taken.
         ego_combined_risk: R_ego of the plan (Eq. 4).
@@ -222,7 +235,10 @@ class Decision:
 
     def summary(self) -> str:
         """Multi-line text a person reads: choice, reason, costs, per-road-user risk."""
-        counts = ", ".join(f"L{k}: {v}" for k, v in sorted(self.level_counts.items(), reverse=True))
+        counts = ", ".join(
+            f"L{k}: {v}" if k != UNASSESSED else f"not risk-assessed (cost bound above the chosen): {v}"
+            for k, v in sorted(self.level_counts.items(), reverse=True)
+        )
         if self.terminal_unsafe:
             counts += f" (L1 includes {self.terminal_unsafe} ending in oncoming traffic's way)"
         lines = [
@@ -247,27 +263,84 @@ class Decision:
         return "\n".join(lines)
 
 
+#: The branch and bound's first batch: the cheapest of the assessed candidates at zero
+#: risk, at least _BATCH_MIN and one in _BATCH_FRACTION of them; each next batch doubles.
+_BATCH_MIN = 32
+_BATCH_FRACTION = 16
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Assessed:
+    """Risk, responsibility, levels and cost of some candidates (``risk.rows``).
+
+    Attributes:
+        risk: their risk; rows ascending when built by ``concatenate``.
+        r_obs, r_ego: their responsibilities, shape (m, k), or None (weight 0).
+        levels: their validity levels, shape (m,).
+        costs: their cost terms, shape (m,) each.
+    """
+
+    risk: RiskAssessment
+    r_obs: np.ndarray | None
+    r_ego: np.ndarray | None
+    levels: np.ndarray
+    costs: CostBreakdown
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[_Assessed]) -> _Assessed:
+        """One assessment of the parts' candidates (disjoint), rows in ascending order."""
+        if len(parts) == 1:
+            return parts[0]
+        order = np.argsort(np.concatenate([part.risk.rows for part in parts]), kind="stable")
+
+        def join(records: Sequence[Any], kind: type) -> Any:
+            fields = {}
+            for name in kind.__slots__:
+                values = [getattr(record, name) for record in records]
+                if isinstance(values[0], np.ndarray):
+                    fields[name] = np.concatenate(values)[order]
+                else:
+                    fields[name] = sum(values)  # counts: triples, integrals
+            return kind(**fields)
+
+        r_obs = r_ego = None
+        if parts[0].r_obs is not None:
+            r_obs = np.concatenate([part.r_obs for part in parts])[order]
+            r_ego = np.concatenate([part.r_ego for part in parts])[order]
+        return cls(
+            join([part.risk for part in parts], RiskAssessment),
+            r_obs,
+            r_ego,
+            np.concatenate([part.levels for part in parts])[order],
+            join([part.costs for part in parts], CostBreakdown),
+        )
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class _Evaluation:
     """One cycle's candidates evaluated: levels of all, risk and cost of the assessed.
 
     Risk, responsibility and cost are evaluated for the assessed candidates only: those
     of the highest level that the integral-free tests (physical limits, predicted mean
-    occupancies, the road edge) leave possible. The others cannot be chosen; their costs
-    are NaN.
+    occupancies, the road edge) leave possible, and among those, when the valid level
+    is possible, only the candidates whose Eq. 5 cost at zero risk is not above the
+    chosen plan's (``Planner._branch_and_bound``). The others cannot be chosen; their
+    costs are NaN.
 
     Attributes:
         candidates: the cycle's n candidates.
         risk: risk of the m assessed candidates (``risk.rows`` are their indices).
         r_obs, r_ego: their responsibilities, shape (m, k); None if the responsibility
             weight is 0 (then only the chosen plan's are computed, for the record).
-        levels: validity level of every candidate, shape (n,).
+        levels: validity level of every candidate, shape (n,); ``UNASSESSED`` for a
+            candidate the branch and bound left out (valid or above R_max: unknown).
         invalid: physically invalid candidates per broken limit, shape (n,) each.
         costs: cost terms of every candidate, shape (n,) each, NaN where not assessed.
         risk_obs: R_k of every candidate, shape (n, k), 0 where not assessed.
         ego_combined: R_ego of every candidate, shape (n,), 0 where not assessed.
         terminal: candidates that end in oncoming traffic's way too late to get out
             (``ethical_planner.terminal``), shape (n,); they are level 1 unless invalid.
+        possible: every candidate's level by the integral-free tests (risk 0), shape (n,).
     """
 
     candidates: Candidates
@@ -280,6 +353,7 @@ class _Evaluation:
     risk_obs: np.ndarray
     ego_combined: np.ndarray
     terminal: np.ndarray
+    possible: np.ndarray
 
     def position(self, index: int) -> int:
         """Row of candidate ``index`` in the assessed arrays."""
@@ -403,49 +477,145 @@ class Planner:
         position = np.full(n, -1)
         position[considered] = np.arange(considered.size)
         with_onset = config.weights.responsibility != 0.0
-        risk = assess_risk(
-            candidates,
-            assessed,
-            tables,
-            position[assessed],
-            prediction,
-            self.ego_shape,
-            self.ego_mass,
-            outside[assessed],
-            config.risk,
-            config.weights.maximin_epsilon,
-            with_onset,
-            self.workers,
-        )
-        risk_obs = np.zeros((n, k))
-        risk_obs[assessed] = risk.risk_obs
-        ego_combined = np.zeros(n)
-        ego_combined[assessed] = risk.ego_combined
-        levels = validity_levels(invalid, collision[:, None, None], outside, risk_obs, ego_combined, max_risk)
-        levels = _rule_levels(levels, breaks)
-        timings["risk"] = timings.get("risk", 0.0) + _since(clock)
 
-        clock = _clock()
-        r_obs = r_ego = None
-        if with_onset:
-            r_obs, r_ego = responsibilities(
+        def evaluate(rows: np.ndarray) -> _Assessed:
+            """Risk, responsibility and cost of candidates ``rows`` (the stage timers run)."""
+            clock = _clock()
+            risk = assess_risk(
                 candidates,
-                assessed,
-                risk.peak_probability,
-                risk.onset_step,
+                rows,
+                tables,
+                position[rows],
                 prediction,
-                corridors,
+                self.ego_shape,
                 self.ego_mass,
-                config.responsibility,
+                outside[rows],
+                config.risk,
+                config.weights.maximin_epsilon,
+                with_onset,
+                self.workers,
             )
-        timings["responsibility"] = timings.get("responsibility", 0.0) + _since(clock)
+            row_levels = _rule_levels(
+                validity_levels(
+                    {name: broken[rows] for name, broken in invalid.items()},
+                    collision[rows, None, None],
+                    outside[rows],
+                    risk.risk_obs,
+                    risk.ego_combined,
+                    max_risk,
+                ),
+                breaks[rows],
+            )
+            timings["risk"] = timings.get("risk", 0.0) + _since(clock)
+            clock = _clock()
+            r_obs = r_ego = None
+            if with_onset:
+                r_obs, r_ego = responsibilities(
+                    candidates,
+                    rows,
+                    risk.peak_probability,
+                    risk.onset_step,
+                    prediction,
+                    corridors,
+                    self.ego_mass,
+                    config.responsibility,
+                )
+            timings["responsibility"] = timings.get("responsibility", 0.0) + _since(clock)
+            clock = _clock()
+            costs = self._costs(candidates, risk, r_obs, r_ego, row_levels)
+            timings["cost"] = timings.get("cost", 0.0) + _since(clock)
+            return _Assessed(risk, r_obs, r_ego, row_levels, costs)
 
-        clock = _clock()
-        costs = _full_costs(self._costs(candidates, risk, r_obs, r_ego, levels), assessed, n)
-        timings["cost"] = timings.get("cost", 0.0) + _since(clock)
+        if best == Validity.VALID:
+            assessed_part = self._branch_and_bound(candidates, assessed, evaluate)
+        else:
+            # Eq. 6 (risk alone) decides below the valid level: no risk-free part bounds it.
+            assessed_part = evaluate(assessed)
+        risk = assessed_part.risk
+        rows = risk.rows
+        levels = possible.copy()
+        levels[assessed] = UNASSESSED
+        levels[rows] = assessed_part.levels
+        risk_obs = np.zeros((n, k))
+        risk_obs[rows] = risk.risk_obs
+        ego_combined = np.zeros(n)
+        ego_combined[rows] = risk.ego_combined
+        costs = _full_costs(assessed_part.costs, rows, n)
         return _Evaluation(
-            candidates, risk, r_obs, r_ego, levels, invalid, costs, risk_obs, ego_combined, terminal
+            candidates,
+            risk,
+            assessed_part.r_obs,
+            assessed_part.r_ego,
+            levels,
+            invalid,
+            costs,
+            risk_obs,
+            ego_combined,
+            terminal,
+            possible,
         )
+
+    def _branch_and_bound(
+        self,
+        candidates: Candidates,
+        assessed: np.ndarray,
+        evaluate: Callable[[np.ndarray], _Assessed],
+    ) -> _Assessed:
+        """Risk of the candidates ``assessed`` that can be chosen or refused by R_max (Eq. 5).
+
+        The valid level is possible: the choice is the valid candidate of least Eq. 5
+        cost, w_risk J_risk + comfort + mobility. J_risk is a weighted sum of terms >= 0
+        (weights >= 0, ``CostWeights``; J_B - rho J_R >= 0 since r < 1 and rho <= 1), so
+        comfort + mobility, computed as Eq. 5 with J_risk = 0, bounds a candidate's
+        cost from below, in floating point too (each operation rounds monotonically).
+        Candidates are evaluated in batches in ascending order of that bound until the
+        next bound exceeds the cheapest valid total found (the incumbent: its level is
+        final once its risk is known; a candidate whose risk puts it above R_max is
+        not one). Every candidate not evaluated then costs more than the chosen one
+        (ties are evaluated, so the tie-break by comfort plus mobility is that of full
+        evaluation), and so does its Eq. 5 cost if R_max refuses it: the refused count
+        and ``Decision.best_by_level[VALID]`` are exact. The continuation of the
+        previous plan is always evaluated (the commitment compares its cost).
+
+        If an evaluated candidate's total ever falls below its bound (a cost term that
+        can be negative), the rest is evaluated too: the result stays that of full
+        evaluation.
+
+        Args:
+            candidates: the cycle's candidates.
+            assessed: the candidates that may be chosen (integral-free level valid or
+                breaks a traffic rule), indices, shape (m,).
+            evaluate: risk, responsibility and cost of some of them.
+
+        Returns:
+            The evaluated candidates' assessment, rows ascending.
+        """
+        weights = self.config.weights
+        rows = assessed
+        comfort, mobility = comfort_and_mobility(*self._risk_free_terms(candidates, rows), weights)
+        bound = eq5_cost(np.zeros(rows.size), comfort, mobility, weights)
+        order = np.argsort(bound, kind="stable")
+        first = np.flatnonzero(candidates.kind[rows] == CandidateKind.CONTINUATION)
+        batch = max(_BATCH_MIN, -(-rows.size // _BATCH_FRACTION))
+        done = np.zeros(rows.size, dtype=bool)
+        parts: list[_Assessed] = []
+        incumbent = math.inf
+        take = np.union1d(first, order[:batch])
+        while take.size:
+            part = evaluate(rows[take])
+            parts.append(part)
+            done[take] = True
+            costs = part.costs
+            if np.any(eq5_cost(costs.risk, costs.comfort, costs.mobility, weights) < bound[take]):
+                take = np.flatnonzero(~done)
+                continue
+            valid = part.levels == Validity.VALID
+            if valid.any():
+                incumbent = min(incumbent, float(costs.total[valid].min()))
+            batch *= 2
+            waiting = order[~done[order]]
+            take = np.sort(waiting[bound[waiting] <= incumbent][:batch])
+        return _Assessed.concatenate(parts)
 
     def _breaks_rules(
         self, candidates: Candidates, lines: StopLines | None, lane_rules: LaneRules | None = None
@@ -485,12 +655,11 @@ class Planner:
         r_ego: np.ndarray | None,
         levels: np.ndarray,
     ) -> CostBreakdown:
-        """Eqs. 5-11 of the assessed candidates ``risk.rows``.
+        """Eqs. 5-11 of the assessed candidates ``risk.rows``, whose levels are ``levels`` (m,).
 
         Without responsibilities (weight 0) J_R is left 0: it does not enter the total.
         """
         config = self.config
-        rows = risk.rows
         m, k = risk.risk_obs.shape
         leaves = risk.leaves_road
         risks, present = risk_set(risk.risk_obs, risk.risk_ego, risk.boundary_risk, leaves)
@@ -510,6 +679,18 @@ class Planner:
             harms,
             counted,
             risk.ego_combined,
+            *self._risk_free_terms(candidates, risk.rows),
+            levels,
+            config.weights,
+        )
+
+    def _risk_free_terms(self, candidates: Candidates, rows: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Inputs of comfort and mobility of candidates ``rows`` (``comfort_and_mobility``), (m,) each.
+
+        Returns:
+            (jerk_lon, jerk_lat, speed deviation, lateral deviation, lanes away).
+        """
+        return (
             candidates.jerk_lon[rows],
             candidates.jerk_lat[rows],
             np.abs(candidates.v[rows] - self.desired_speed).mean(axis=1),
@@ -517,10 +698,8 @@ class Planner:
                 candidates.d[rows],
                 self.environment.lane_offsets,
                 self.environment.lane_width,
-                config.weights.path_reference,
+                self.config.weights.path_reference,
             ),
-            levels[rows],
-            config.weights,
         )
 
     def plan(
@@ -642,6 +821,12 @@ class Planner:
         equation = "Eq. 5" if best_level == Validity.VALID else "Eq. 6"
         if best_level == Validity.VALID:
             reason = f"lowest total cost (Eq. 5) among {len(in_level)} valid candidates"
+            left_out = int((grid.levels == UNASSESSED).sum())
+            if left_out:
+                reason += (
+                    f" ({left_out} more not risk-assessed: their Eq. 5 cost at zero risk is "
+                    "already above the chosen plan's)"
+                )
             reason += self._refused_by_max_risk(grid, index)
         elif best_level == Validity.COLLISION:
             reason = self._fallback_reason(grid, in_level, index)
@@ -796,16 +981,26 @@ class Planner:
 
 
 def _best_by_level(grid: _Evaluation) -> dict[int, LevelBest]:
-    """The cheapest candidate of every level costed (one sort, no loop over candidates)."""
+    """The cheapest candidate of every level costed completely (one sort, no loop over candidates).
+
+    A candidate the branch and bound left out (``UNASSESSED``) is at its integral-free
+    level or above R_max: those levels get no entry unless it is the valid level, whose
+    cheapest candidate the branch and bound finds exactly.
+    """
     costs = grid.costs
     rows = grid.risk.rows
     order = rows[
         np.lexsort((costs.comfort[rows] + costs.mobility[rows], costs.total[rows], grid.levels[rows]))
     ]
     levels, first = np.unique(grid.levels[order], return_index=True)
+    left_out = grid.levels == UNASSESSED
+    unknown = {int(v) for v in np.unique(grid.possible[left_out])} - {int(Validity.VALID)}
+    if left_out.any():
+        unknown.add(int(Validity.ABOVE_MAX_RISK))
     return {
         int(level): LevelBest(int(i), float(costs.total[i]), CandidateParameters.of(grid.candidates, int(i)))
         for level, i in zip(levels, order[first], strict=True)
+        if int(level) not in unknown
     }
 
 

@@ -34,6 +34,11 @@ class Validity(IntEnum):
     VALID = 10
 
 
+#: Not a validity level: the mark of a candidate whose risk the planner did not evaluate,
+#: because its Eq. 5 cost cannot be below the chosen plan's even at zero risk
+#: (``Planner._branch_and_bound``). Its level is valid or above R_max; which is unknown.
+UNASSESSED = -1
+
 #: Reasons of validity level 0, in the order of ``physically_invalid``.
 LIMITS = ("speed", "acceleration", "curvature", "lateral_acceleration", "friction")
 

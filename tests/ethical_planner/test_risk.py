@@ -36,7 +36,7 @@ from ethical_planner.risk import outside_drivable_area, prediction_collision_pro
 from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser
 from ethical_planner.road_users import RoadUserType as T
 from ethical_planner.terminal import terminally_unsafe
-from ethical_planner.validity import physically_invalid, validity_levels
+from ethical_planner.validity import UNASSESSED, Validity, physically_invalid, validity_levels
 from ethical_planner.workers import Workers
 
 
@@ -309,6 +309,20 @@ def _brute_force_decision(planner, situation):
     return levels, in_level[order[0]], costs
 
 
+def _assert_levels(decision, levels, costs, weights):
+    """The decision's levels are the brute force's, but for candidates left unassessed.
+
+    Those (``UNASSESSED``) are valid or above R_max (or break a rule) in the brute force,
+    and cost more by Eq. 5 than the chosen plan.
+    """
+    left_out = decision.candidate_levels == UNASSESSED
+    np.testing.assert_array_equal(decision.candidate_levels[~left_out], levels[~left_out])
+    possible = [Validity.VALID, Validity.ABOVE_MAX_RISK, Validity.BREAKS_TRAFFIC_RULE]
+    assert np.isin(levels[left_out], possible).all()
+    eq5 = weights.risk * costs.risk + costs.comfort + costs.mobility
+    assert (eq5[left_out] > decision.costs["total"]).all()
+
+
 def _street(seed: int):
     """A two-lane street with cars, a cyclist and pedestrians around the ego."""
     rng = np.random.default_rng(seed)
@@ -340,7 +354,7 @@ def test_planner_decides_as_evaluating_every_candidate_and_triple(preset_name, s
     )
     decision = planner.plan(situation.ego, situation.road_users)
     levels, index, costs = _brute_force_decision(planner, situation)
-    np.testing.assert_array_equal(decision.candidate_levels, levels)
+    _assert_levels(decision, levels, costs, planner.config.weights)
     assert decision.chosen_index == index
     for name, value in decision.costs.items():
         assert value == getattr(costs, name)[index], name  # the same numbers, to the bit
@@ -374,7 +388,7 @@ def test_planner_with_a_mixture_prediction_decides_as_evaluating_every_candidate
     planner.predictor = _MixturePredictor(planner.predictor)
     decision = planner.plan(situation.ego, situation.road_users)
     levels, index, costs = _brute_force_decision(planner, situation)
-    np.testing.assert_array_equal(decision.candidate_levels, levels)
+    _assert_levels(decision, levels, costs, planner.config.weights)
     assert decision.chosen_index == index
     for name, value in decision.costs.items():
         assert value == getattr(costs, name)[index], name

@@ -1,0 +1,124 @@
+"""The planner's branch and bound over candidates chooses what evaluating every candidate chooses.
+
+Reference: the same planner with ``Planner._branch_and_bound`` replaced by the full
+evaluation of every candidate it is given (what the planner did before). Chosen index,
+level, every cost term, the reason and the R_max refusals must be equal to the bit.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from benchmarks.planning_cycle import bench_scene, grid_config
+from ethical_planner.config import preset
+from ethical_planner.environment import RoadEnvironment
+from ethical_planner.planner import Planner
+from ethical_planner.road_users import DEFAULT_SHAPES, KinematicState, RoadUser
+from ethical_planner.road_users import RoadUserType as T
+from ethical_planner.situations import overtaking_cyclist
+from ethical_planner.validity import UNASSESSED, Validity
+
+PRESETS = ("ethical", "ethical_responsible", "selfish", "standard")
+
+
+def _street(seed: int):
+    """A two-lane street with cars, a cyclist and pedestrians ahead of the ego (seeded)."""
+    rng = np.random.default_rng(seed)
+    env = RoadEnvironment.along_path([[-20, 0], [200, 0]], lanes_left=1, lanes_right=0, margin=0.5)
+    users = []
+    kinds = (T.CAR, T.CAR, T.BICYCLE, T.PEDESTRIAN, T.TRUCK, T.CAR)[: int(rng.integers(1, 7))]
+    for i, kind in enumerate(kinds):
+        x = rng.uniform(8, 60)
+        y = rng.choice([0.0, 3.5]) if kind is not T.PEDESTRIAN else rng.uniform(-2.5, 5.5)
+        yaw = math.pi if y > 2 and kind is not T.PEDESTRIAN else rng.uniform(-0.3, 0.3)
+        speed = {T.CAR: 8.0, T.TRUCK: 6.0, T.BICYCLE: 4.0, T.PEDESTRIAN: 1.3}[kind] * rng.uniform(0.3, 1.1)
+        users.append(RoadUser(i + 1, kind, KinematicState(x, y, yaw, speed), DEFAULT_SHAPES[kind]))
+    return env, KinematicState(0.0, 0.0, 0.0, rng.uniform(6, 14)), tuple(users)
+
+
+def _full(self, candidates, assessed, evaluate):
+    """Every candidate assessed (the reference)."""
+    return evaluate(assessed)
+
+
+def _decide(config, env, ego, users, cycles, monkeypatch=None):
+    """Decisions of ``cycles`` cycles (the ego replans from the same state: the continuation is in play)."""
+    planner = Planner(config, env)
+    return [planner.plan(ego, users) for _ in range(cycles)]
+
+
+def _reason(text: str) -> str:
+    """The reason without the count of valid candidates (the unassessed are not counted)."""
+    return re.sub(r"among \d+ valid candidates( \(\d+ more not risk-assessed[^)]*\))?", "", text)
+
+
+def _assert_same(fast, full):
+    assert fast.chosen_index == full.chosen_index
+    assert fast.level == full.level
+    assert fast.continued == full.continued
+    for name, value in full.costs.items():
+        assert fast.costs[name] == value or (math.isnan(value) and math.isnan(fast.costs[name])), name
+    assert fast.max_risk_refused == full.max_risk_refused
+    assert _reason(fast.reason) == _reason(full.reason)
+    assert fast.ego_combined_risk == full.ego_combined_risk
+    np.testing.assert_array_equal(fast.trajectory.x, full.trajectory.x)
+    for a, b in zip(fast.road_users, full.road_users, strict=True):
+        assert a == b
+    # What the record keeps of the costed levels is the full evaluation's.
+    for level, best in fast.best_by_level.items():
+        assert best == full.best_by_level[level]
+    assert int(Validity.VALID) not in full.best_by_level or int(Validity.VALID) in fast.best_by_level
+    # Candidates assessed: their levels are the full evaluation's; the others are marked.
+    levels, reference = np.asarray(fast.candidate_levels), np.asarray(full.candidate_levels)
+    left_out = levels == UNASSESSED
+    np.testing.assert_array_equal(levels[~left_out], reference[~left_out])
+    assert np.isin(
+        reference[left_out], [Validity.VALID, Validity.ABOVE_MAX_RISK, Validity.BREAKS_TRAFFIC_RULE]
+    ).all()
+    assert fast.level_counts.get(UNASSESSED, 0) == int(left_out.sum())
+    assert sum(fast.level_counts.values()) == levels.size
+    return int(left_out.sum())
+
+
+def _compare(config, env, ego, users, monkeypatch, cycles=1):
+    fast = _decide(config, env, ego, users, cycles)
+    with monkeypatch.context() as patch:
+        patch.setattr(Planner, "_branch_and_bound", _full)
+        full = _decide(config, env, ego, users, cycles)
+    return sum(_assert_same(a, b) for a, b in zip(fast, full, strict=True))
+
+
+@pytest.mark.parametrize("preset_name", PRESETS)
+def test_random_streets_choose_as_full_evaluation(preset_name, monkeypatch):
+    """Eight random streets per preset, two cycles each (the second may keep the continuation)."""
+    left_out = 0
+    for seed in range(8):
+        env, ego, users = _street(seed)
+        config = preset(preset_name).with_overrides({"sampling": {"horizons": [2.0, 4.0]}})
+        left_out += _compare(config, env, ego, users, monkeypatch, cycles=2)
+    assert left_out > 0  # the branch and bound did leave candidates out
+
+
+@pytest.mark.parametrize("preset_name", PRESETS)
+@pytest.mark.parametrize(("grid", "n_users"), [("225", 0), ("225", 5), ("225", 20), ("default", 5)])
+def test_bench_scenes_choose_as_full_evaluation(preset_name, grid, n_users, monkeypatch):
+    scene = bench_scene(n_users)
+    config = grid_config(grid, preset(preset_name))
+    _compare(config, scene.environment, scene.ego, scene.road_users, monkeypatch)
+
+
+def test_r_max_refusals_are_counted_and_the_incumbent_is_a_final_valid_plan(monkeypatch):
+    """Fig. 3: the overtakes R_max refuses are cheaper by Eq. 5; none may become the incumbent."""
+    situation = overtaking_cyclist()
+    config = preset("standard").with_overrides(
+        {"sampling": {"horizons": [3.0]}, "risk": {"max_acceptable_risk": 0.01}}
+    )
+    left_out = _compare(config, situation.environment, situation.ego, situation.road_users, monkeypatch)
+    assert left_out > 0
+    decision = Planner(config, situation.environment).plan(situation.ego, situation.road_users)
+    assert decision.max_risk_refused > 0 and decision.level == Validity.VALID
+    assert "not risk-assessed" in decision.summary()
