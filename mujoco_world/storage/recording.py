@@ -27,9 +27,13 @@ Entities (all in the world frame, z up, road plane z = 0):
   ``series/level``, on the ``sim_time`` and ``cycle`` timelines, sent in columns.
 * Why this plan, per planning cycle (``sim_time`` and ``cycle``):
 
-  - ``series/candidates/{total,valid}`` and ``series/rejected/<level>`` with
-    <level> one of ``physically_invalid``, ``collision``, ``leaves_road``,
-    ``above_max_risk``: candidates per validity level (they add up to ``total``);
+  - ``series/candidates/{total,valid,unassessed}`` and ``series/rejected/<level>``
+    with <level> one of ``physically_invalid``, ``collision``, ``leaves_road``,
+    ``above_max_risk``, ``breaks_traffic_rule``: candidates per validity level (they
+    add up to ``total``); ``unassessed``: candidates whose risk the planner did not
+    evaluate because their Eq. 5 cost at zero risk is already above the chosen
+    plan's (valid or above R_max, unknown which; drawn in a pale blue-grey, never
+    counted as either level);
     ``series/rejected/limit/<limit>``: candidates breaking each physical limit
     (``speed``, ``acceleration``, ``curvature``, ``lateral_acceleration``,
     ``friction``; one candidate may break several); ``series/rejected/
@@ -94,7 +98,7 @@ from ethical_planner.planner import Decision
 from ethical_planner.road_users import RoadUserType
 from ethical_planner.sampling import CandidateKind
 from ethical_planner.validation import check
-from ethical_planner.validity import LIMITS, Validity
+from ethical_planner.validity import LIMITS, UNASSESSED, Validity
 from mujoco_world.agents.ego_planner import Plan
 from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.loop.metrics import DISTANCE_CAP, ego_time_to_collision, footprint_extents
@@ -142,6 +146,8 @@ LEVEL_COLORS: dict[int, tuple[int, int, int, int]] = {
     4: (170, 80, 220, 90),
     10: (60, 200, 80, 110),
 }
+#: RGBA colour of candidates whose risk the planner did not evaluate (``UNASSESSED``).
+UNASSESSED_COLOR = (150, 160, 190, 50)
 _ELLIPSE_POINTS = 25
 _Z_LINE = 0.05  # lines slightly above the road surface [m]
 #: Stop-line colours: a light red, a light not red, a stop sign.
@@ -431,6 +437,7 @@ class RerunRecorder(RunObserver):
         counts = decision.level_counts
         s.add("series/candidates/total", time, c, float(len(decision.candidate_levels)))
         s.add("series/candidates/valid", time, c, float(counts.get(int(Validity.VALID), 0)))
+        s.add("series/candidates/unassessed", time, c, float(counts.get(UNASSESSED, 0)))
         for level in REJECTED_LEVELS:
             s.add(f"series/rejected/{_level_name(level)}", time, c, float(counts.get(int(level), 0)))
         s.add("series/rejected/max_risk_refused", time, c, float(decision.max_risk_refused))
@@ -640,6 +647,11 @@ class RerunRecorder(RunObserver):
         rec.log(
             "series/candidates/total", rr.SeriesLines(colors=[(230, 230, 230)], names=["total"]), static=True
         )
+        rec.log(
+            "series/candidates/unassessed",
+            rr.SeriesLines(colors=[UNASSESSED_COLOR[:3]], names=["not risk-assessed"]),
+            static=True,
+        )
         for limit in LIMITS:
             rec.log(f"series/rejected/limit/{limit}", rr.SeriesLines(names=[f"limit: {limit}"]), static=True)
         families = ", ".join(f"{k.value} {k.name.lower()}" for k in CandidateKind)
@@ -797,8 +809,11 @@ class RerunRecorder(RunObserver):
         if limit is not None and n > limit:
             index = np.sort(self._rng.choice(n, size=limit, replace=False))
         strips = _to3(np.stack([cx[index], cy[index]], axis=-1))
-        palette = np.array([LEVEL_COLORS.get(int(v), (200, 200, 200, 80)) for v in range(11)], dtype=np.uint8)
-        colors = palette[np.clip(levels[index].astype(int), 0, 10)]
+        # Row v + 1 of the palette colours level v; row 0 the unassessed (v = -1).
+        palette = np.array(
+            [UNASSESSED_COLOR, *(LEVEL_COLORS.get(v, (200, 200, 200, 80)) for v in range(11))], dtype=np.uint8
+        )
+        colors = palette[np.clip(levels[index].astype(int) - UNASSESSED, 0, 11)]
         rec.log("world/plan/candidates", rr.LineStrips3D(strips, colors=colors, radii=0.02))
 
     def _log_prediction(self, decision: Decision) -> None:

@@ -275,11 +275,14 @@ def test_rejected_candidates_per_level_add_up_to_every_candidate(hidden_pedestri
     _, probe, chunks = hidden_pedestrian_run
     levels = {name: per_cycle(chunks, f"/series/rejected/{name}") for name in REJECTED}
     valid = per_cycle(chunks, "/series/candidates/valid")
+    unassessed = per_cycle(chunks, "/series/candidates/unassessed")
     total = per_cycle(chunks, "/series/candidates/total")
     assert len(total) == len(probe.decisions) > 10
-    assert np.array_equal(sum(levels.values()) + valid, total)
+    assert np.array_equal(sum(levels.values()) + valid + unassessed, total)
     for c, decision in enumerate(probe.decisions):
-        by_level = np.bincount(np.asarray(decision.candidate_levels), minlength=11)
+        # Row v + 1 counts level v; row 0 the candidates the planner left unassessed.
+        by_level = np.bincount(np.asarray(decision.candidate_levels) + 1, minlength=12)[1:]
+        assert unassessed[c] == np.sum(np.asarray(decision.candidate_levels) == -1)
         assert total[c] == len(decision.candidate_levels)
         assert valid[c] == by_level[10]
         for name, level in REJECTED.items():
