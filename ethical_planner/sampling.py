@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from ethical_planner.config import SamplingConfig, VehicleConfig
+from ethical_planner.geometry import wrap_angle
 from ethical_planner.jit import kernel
 from ethical_planner.reference_path import ReferencePath, cartesian_states
 from ethical_planner.road_users import KinematicState
@@ -73,7 +74,7 @@ def frenet_state(state: KinematicState, path: ReferencePath) -> FrenetState:
     s, d = path.to_frenet(np.array(state.x), np.array(state.y))
     s, d = float(s), float(d)
     _, _, theta, kappa, _ = path.evaluate(np.array(s))
-    delta = state.yaw - float(theta)
+    delta = float(wrap_angle(state.yaw - float(theta)))  # the path's heading may lie across +-pi
     one_minus_kd = 1.0 - float(kappa) * d
     if one_minus_kd <= 0.05:
         raise ValueError(f"ego lies {d:.1f} m from the reference path, beyond its radius of curvature")

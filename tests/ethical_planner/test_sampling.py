@@ -304,3 +304,17 @@ def test_a_creeping_ego_that_rolls_back_a_little_keeps_its_nose_forward():
     lateral_move = np.abs(candidates.d - candidates.d[:, :1]).max(axis=1) < 0.01
     # A motion that stays in its lane keeps the path's heading, forwards or backwards.
     assert np.abs(candidates.yaw[rolls_back & lateral_move]).max() < 0.05
+
+
+@pytest.mark.parametrize("yaw", [np.pi - 0.3, -np.pi + 0.3])
+def test_frenet_heading_across_pi_is_the_wrapped_angle(yaw):
+    # A straight path heading west (theta = pi) and an ego 0.3 rad off it, its yaw on
+    # either side of +-pi. By hand (kappa = 0): d' = tan(+-0.3), d_dot = v sin(+-0.3).
+    # Unwrapped, -pi + 0.3 - pi = -5.98 rad was clipped to -1.2 rad: d' = -2.57, a wild
+    # lateral start that diverged in closed loop (SinD 8021_1804: "ego_x must be finite").
+    path = ReferencePath.from_polyline(np.column_stack([-np.linspace(0.0, 100.0, 101), np.zeros(101)]))
+    start = frenet_state(KinematicState(-50.0, 0.5, yaw, 6.0), path)
+    sign = 1.0 if yaw < 0 else -1.0  # -pi + 0.3 lies 0.3 rad counter-clockwise of pi
+    assert start.d_prime == pytest.approx(sign * np.tan(0.3), abs=1e-6)
+    assert start.d_dot == pytest.approx(sign * 6.0 * np.sin(0.3), abs=1e-6)
+    assert start.s_dot == pytest.approx(6.0 * np.cos(0.3), abs=1e-6)
