@@ -23,6 +23,8 @@ from mujoco_world.scenario.spec import Boundary, DebrisSpec, RoadKind, RoadName,
 _SAMPLE_M = 1.0
 #: Thickness of wall and kerb boxes [m].
 BOUNDARY_THICKNESS_M = 0.4
+#: Length of the probes either side of a boundary segment that tell which side is the road [m].
+OUTWARD_PROBE_M = 1.0
 #: Height of walls and kerbs [m] (only for pictures: the world is planar).
 BOUNDARY_HEIGHT_M = {Boundary.WALL: 1.0, Boundary.KERB: 0.15}
 
@@ -312,6 +314,22 @@ class RoadGeometry:
 
     # ------------------------------------------------------------------ obstacles
 
+    def _outward(self, mid: np.ndarray, normal: np.ndarray) -> np.ndarray:
+        """``normal`` or its opposite: the one pointing away from the drivable area at ``mid``.
+
+        The side with less road on a probe of ``OUTWARD_PROBE_M`` is outside. A point a few
+        centimetres off the line does not tell: a simplified boundary (an imported map's
+        outline is simplified by 0.1 m) can lie that far inside the road, which put a
+        100 m kerb 0.3 m into DEU_A9-3_1's left lane.
+        """
+        ahead = LineString([mid, mid + OUTWARD_PROBE_M * normal])
+        behind = LineString([mid, mid - OUTWARD_PROBE_M * normal])
+        road_ahead = self.drivable_area.intersection(ahead).length
+        road_behind = self.drivable_area.intersection(behind).length
+        if road_ahead == road_behind:  # no road on either side, or on both: the closest look
+            return -normal if self.drivable_area.contains(shapely.Point(*(mid + 0.05 * normal))) else normal
+        return -normal if road_ahead > road_behind else normal
+
     def static_boxes(self) -> tuple[StaticBox, ...]:
         """Wall or kerb boxes along the boundaries, just outside the drivable area."""
         kind = self.spec.boundary
@@ -328,10 +346,8 @@ class RoadGeometry:
                 if length < 1e-3:
                     continue
                 tangent = seg / length
-                normal = np.array([-tangent[1], tangent[0]])
                 mid = 0.5 * (a + b)
-                if self.drivable_area.contains(shapely.Point(*(mid + 0.05 * normal))):
-                    normal = -normal  # point away from the road
+                normal = self._outward(mid, np.array([-tangent[1], tangent[0]]))
                 center = mid + 0.5 * t * normal
                 boxes.append(
                     StaticBox(

@@ -22,7 +22,7 @@ from mujoco_world.scenario.commonroad import (  # noqa: E402
     split_reference,
 )
 from mujoco_world.scenario.commonroad_tracks import shared_commonroad  # noqa: E402
-from mujoco_world.scenario.road import close_union  # noqa: E402
+from mujoco_world.scenario.road import box_footprint, build_road, close_union  # noqa: E402
 from mujoco_world.scenario.sources import resolve_scenario  # noqa: E402
 from mujoco_world.scenario.spec import BehaviourKind, RoadKind  # noqa: E402
 from mujoco_world.storage.recording import RecorderConfig, RerunRecorder  # noqa: E402
@@ -383,3 +383,19 @@ def test_real_ngsim_map_has_no_kerbs_inside_the_road():
     assert area.geom_type == "Polygon" and len(area.interiors) == 0
     outline = area.exterior
     assert all(outline.distance(shapely.Point(p)) < 0.2 for b in scenario.road.map.boundaries for p in b)
+
+
+@needs_shared
+def test_real_a9_kerbs_lie_outside_the_road():
+    # DEU_A9-3_1: the simplified outline of the left lane runs up to 0.08 m inside the road
+    # over a 100 m segment, where a 5 cm probe took the road for the outside: its kerb stood
+    # 0.3 m into the lane and every planner's ego scraped it at 28 m/s (t = 2.9-4.6 s).
+    scenario = import_commonroad(SHARED / "commonroad-io-tests/DEU_A9-3_1_T-1.xml")
+    road = build_road(scenario.road)
+    boxes = road.static_boxes()
+    assert len(boxes) > 20
+    assert not any(road.drivable_area.contains(shapely.Point(b.center)) for b in boxes)
+    # The ethical ego's front-left corner touched the kerb at (414.90, -5860.77), 0.4 m inside
+    # the lane's edge (y = -5860.37 there): the kerb now begins at the edge.
+    nearest = min(box_footprint(b).distance(shapely.Point(414.90, -5860.77)) for b in boxes)
+    assert nearest == pytest.approx(0.4, abs=0.1)

@@ -17,7 +17,7 @@ from mujoco_world.scenario.catalog import (
     get_scenario,
     random_scenario,
 )
-from mujoco_world.scenario.road import build_road
+from mujoco_world.scenario.road import BOUNDARY_THICKNESS_M, RoadGeometry, build_road
 from mujoco_world.scenario.sources import SCENARIO_SOURCES, resolve_scenario
 from mujoco_world.scenario.spec import RoadSpec, RouteSpec, Scenario, load_scenario, scenario_from_dict
 
@@ -253,3 +253,15 @@ def test_each_range_bound_is_inclusive_and_a_step_beyond_is_refused():
         data.setdefault(owner, {})[name] = high * 1.001 + 1e-9
         with pytest.raises(ValueError, match=re.escape(f"{key} must lie in")):
             scenario_from_dict(data)
+
+
+def test_a_boundary_a_little_inside_the_road_gets_its_kerb_on_the_outside():
+    # A 10 m wide road, y in [0, 10]; its left boundary simplified to y = 9.92 (8 cm inside,
+    # as an imported outline can be). By hand: the kerb (0.4 m) lies on the outer side of the
+    # line, centre y = 9.92 + 0.2 = 10.12, not at 9.72 inside the lane.
+    spec = RoadSpec(kind="straight", length=100.0, boundary="kerb")
+    area = shapely.box(0.0, 0.0, 100.0, 10.0)
+    line = np.array([[0.0, 9.92], [100.0, 9.92]])
+    road = RoadGeometry(spec, np.array([[0.0, 5.0], [100.0, 5.0]]), None, area, (line,))
+    (kerb,) = road.static_boxes()
+    assert kerb.center == pytest.approx((50.0, 9.92 + 0.5 * BOUNDARY_THICKNESS_M))
