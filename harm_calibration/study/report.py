@@ -225,11 +225,10 @@ def _runs_section(analysis: StudyAnalysis, rejected_by_reason: dict[str, list[st
         cells = [str(analysis.table[p].crash_classes.get(name, 0)) for p in analysis.planners]
         out.append(f"| `{name}` | {what} | " + " | ".join(cells) + " |")
     if rejected_by_reason:
-        out += ["", "Scenarios refused at import (not counted above):", ""]
-        for reason, names in sorted(rejected_by_reason.items()):
-            out.append(
-                f"- {reason}: {len(names)} ({', '.join(sorted(names)[:8])}{' ...' if len(names) > 8 else ''})"
-            )
+        out += ["", "Scenarios refused at import (not counted above), by reason:", ""]
+        for reason, files in sorted(rejected_by_reason.items()):
+            out.append(f"- {reason}: {len(files)}")
+            out += [f"  - {f}" for f in sorted(files)]
     return out
 
 

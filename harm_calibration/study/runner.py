@@ -21,6 +21,7 @@ After the runs, ``write_study`` reads every record of the tasks back, analyses t
 from __future__ import annotations
 
 import math
+import re
 import time
 from collections import defaultdict
 from collections.abc import Callable, Sequence
@@ -31,7 +32,14 @@ from typing import Any
 from ethical_planner.registry import Registry
 from ethical_planner.road_users import RoadUserType
 from ethical_planner.validation import check
-from harm_calibration.study.analysis import BodyHarm, GroupDefinition, StudyRun, analyse, to_plain_analysis
+from harm_calibration.study.analysis import (
+    BodyHarm,
+    GroupDefinition,
+    StudyAnalysis,
+    StudyRun,
+    analyse,
+    to_plain_analysis,
+)
 from harm_calibration.study.attribution import REPLAY, attribute
 from harm_calibration.study.figures import figure_harm, figure_risks
 from harm_calibration.study.report import render
@@ -239,6 +247,16 @@ def study_run(record: RunRecord) -> StudyRun:
 
 # --------------------------------------------------------------------------- outputs
 
+
+def _refusal_detail(reason: str) -> str:
+    """An import refusal's message without the exception name, the file path and the key."""
+    detail = reason.split(": ", 1)[1] if reason.startswith("CommonRoadImportError: ") else reason
+    head, sep, rest = detail.partition(": ")
+    if sep and head.endswith(".xml"):
+        detail = rest
+    return re.sub(r"\s*\[rejected: [a-z_]+\]\s*$", "", detail)
+
+
 DIFFERENCES = (
     "- **Harm** is measured: the CRSS harm model evaluated at the delta-v and impact area "
     "the MuJoCo contact physics produced, not the model's harm at a kinematic overlap of "
@@ -276,6 +294,33 @@ def _speed_lines(results: Sequence[TaskResult], wall: float, workers: int, backe
     return lines
 
 
+def _spec_lines(
+    runs: Sequence[StudyRun], analysis: StudyAnalysis, planners: Sequence[str], groups: GroupDefinition
+) -> tuple[list[str], dict[str, list[str]]]:
+    """The report's opening lines (what ran, what failed and why) and the refusals by reason."""
+    rejected: dict[str, list[str]] = defaultdict(list)
+    details = {r.scenario: _refusal_detail(r.reason) for r in runs if r.rejected is not None}
+    for scenario, reason in analysis.rejected.items():
+        label = f"{reason} ({REJECTION_REASONS.get(reason, reason)})"
+        rejected[label].append(f"{scenario}: {details[scenario]}")
+    failed = [r for r in runs if r.outcome == "failed" and r.rejected is None]
+    by_scenario: dict[str, list[StudyRun]] = defaultdict(list)
+    for r in runs:
+        by_scenario[r.scenario].append(r)
+    complete = sum(1 for rs in by_scenario.values() if all(r.outcome != "failed" for r in rs))
+    seeds = sorted({r.seed for r in runs})
+    spec = [
+        f"{len(runs)} runs: {len(by_scenario)} scenarios x {len(planners)} planners "
+        f"({', '.join(planners)}) x seeds {', '.join(map(str, seeds))}; {complete} scenarios ran with "
+        f"every planner, {len({r.scenario for r in failed})} had a run that failed in the world, "
+        f"{len(analysis.rejected)} were refused at import. {groups.describe()}.",
+    ]
+    if failed:
+        spec += ["", "Runs that failed in the world:", ""]
+        spec += [f"- {r.scenario} / {r.planner} / seed {r.seed}: {r.reason}" for r in failed]
+    return spec, dict(rejected)
+
+
 def write_study(
     out: str | Path,
     results: Sequence[TaskResult],
@@ -304,22 +349,11 @@ def write_study(
     paths["statistics"] = write_json(out / "statistics.json", plain)
     paths["fig5_png"], paths["fig5_pdf"] = figure_risks(analysis, out)
     paths["fig6_png"], paths["fig6_pdf"] = figure_harm(analysis, out)
-    rejected: dict[str, list[str]] = defaultdict(list)
-    for scenario, reason in analysis.rejected.items():
-        rejected[f"{reason} ({REJECTION_REASONS.get(reason, reason)})"].append(scenario)
-    failed = sorted({r.scenario for r in runs if r.outcome == "failed" and r.rejected is None})
-    seeds = sorted({r.seed for r in runs})
-    spec = [
-        f"{len(results)} runs: {len({r.scenario for r in runs})} scenarios x {len(planners)} planners "
-        f"({', '.join(planners)}) x seeds {', '.join(map(str, seeds))}; {len(analysis.scenarios)} "
-        f"scenarios ran, {len(analysis.rejected)} were refused at import. {groups.describe()}.",
-    ]
-    if failed:
-        spec.append(f"Runs that failed in the world (reasons in statistics.json): {', '.join(failed[:10])}.")
+    spec, rejected = _spec_lines(runs, analysis, planners, groups)
     notes = list(DIFFERENCES)
     if groups.motorcycles:
         notes.append("- Motorcyclists count as VRUs, as in the paper's reference evaluation.")
-    report = render(analysis, spec, _speed_lines(results, wall, workers, backend), dict(rejected), notes)
+    report = render(analysis, spec, _speed_lines(results, wall, workers, backend), rejected, notes)
     paths["report"] = out / "report.md"
     paths["report"].write_text(report, encoding="utf-8")
     return paths
