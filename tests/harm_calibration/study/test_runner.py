@@ -73,7 +73,9 @@ def test_process_and_dask_backends_give_identical_runs_and_a_rerun_resumes(scena
     # Every refused file with its own reason, without the exception name, path or key.
     assert "ZAM_Study-3_1_T-1" in report and "no planning problem, so no ego to simulate" in report
     assert "[rejected:" not in report and "CommonRoadImportError" not in report
-    assert "1 scenarios ran with every planner, 0 had a run that failed in the world, 1 were refused" in report
+    assert "1 scenarios ran with every planner, 0 had a run that failed in the world, 1 were refused" in (
+        report
+    )
 
     # A rerun reads every record back and runs nothing again.
     records = sorted((tmp_path / "process").glob("*/summary.json"))
