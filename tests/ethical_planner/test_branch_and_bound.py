@@ -122,3 +122,31 @@ def test_r_max_refusals_are_counted_and_the_incumbent_is_a_final_valid_plan(monk
     decision = Planner(config, situation.environment).plan(situation.ego, situation.road_users)
     assert decision.max_risk_refused > 0 and decision.level == Validity.VALID
     assert "not risk-assessed" in decision.summary()
+
+
+def test_a_negative_cost_term_makes_the_branch_and_bound_evaluate_every_candidate(monkeypatch):
+    """The bound assumes J_risk >= 0; a term that breaks it (here: a rebate on risky plans) is detected.
+
+    The rebate lowers J_risk below 0 for candidates with any risk, so comfort plus mobility
+    no longer bounds Eq. 5 from below; the planner must then evaluate every candidate.
+    """
+    import ethical_planner.planner as planner_module
+    from ethical_planner.cost import CostBreakdown, eq5_cost
+
+    exact = planner_module.total_cost
+
+    def with_rebate(*args):
+        costs = exact(*args)
+        weights, levels = args[-1], args[-2]
+        j_risk = costs.risk - 100.0 * (costs.bayes > 0)
+        total = np.where(
+            levels == Validity.VALID, eq5_cost(j_risk, costs.comfort, costs.mobility, weights), j_risk
+        )
+        fields = {name: getattr(costs, name) for name in CostBreakdown.__slots__}
+        return CostBreakdown(**{**fields, "risk": j_risk, "total": total})
+
+    config = preset("ethical").with_overrides({"sampling": {"horizons": [2.0, 4.0]}})
+    env, ego, users = _street(0)
+    assert _compare(config, env, ego, users, monkeypatch) > 0  # without the rebate, some are left out
+    monkeypatch.setattr(planner_module, "total_cost", with_rebate)
+    assert _compare(config, env, ego, users, monkeypatch) == 0
