@@ -209,6 +209,17 @@ def _behaviours(record: RunRecord) -> dict[int, str | None]:
     return out
 
 
+def _scenario_key(record: RunRecord) -> str:
+    """The scenario part of the run id: one per scenario file (``run_folder.run_id``).
+
+    Not the scenario's name: two files may carry one benchmark id (``ZAM_Tutorial-1_1_T-1``
+    in ZAM_Tutorial-1_1_T-1.xml and ZAM_Tutorial-1_2_T-1.xml), and pairing their runs as one
+    scenario would mix two experiments.
+    """
+    parts = record.run_id.rsplit("__", 2)
+    return parts[0] if len(parts) == 3 else record.summary.scenario
+
+
 def study_run(record: RunRecord) -> StudyRun:
     """What the analysis needs of one run record."""
     s = record.summary
@@ -227,7 +238,7 @@ def study_run(record: RunRecord) -> StudyRun:
     rejected = rejection_reason(s.reason) if s.outcome == "failed" else None
     return StudyRun(
         run_id=record.run_id,
-        scenario=s.scenario,
+        scenario=_scenario_key(record),
         planner=s.planner,
         seed=s.seed,
         outcome=s.outcome,

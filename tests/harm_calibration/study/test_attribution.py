@@ -86,7 +86,7 @@ def _record(collisions, behaviour, source="ZAM_X-1_1.xml", outcome="crash", scen
         collisions=tuple(collisions),
         ego_collided=bool(collisions),
     )
-    return RunRecord(f"{scenario}__ethical__s0", summary, scenario_source=source)
+    return RunRecord(f"{scenario}-0123456789__ethical__s0", summary, scenario_source=source)
 
 
 def test_the_run_record_gives_the_crash_and_older_commonroad_records_count_as_replays(rear_end):
@@ -125,3 +125,16 @@ def test_crash_counts_rates_and_harm_with_and_without_the_replays_rear_ends(rear
     assert ego.harm.value + third.harm.value == pytest.approx(harm_a + harm_b)
     assert ego.harm_excluding.value + third.harm_excluding.value == pytest.approx(harm_b)
     assert ego.harm_ego_collisions_excluding == pytest.approx(ahead.a.harm_measured)
+
+
+def test_two_files_with_one_benchmark_id_stay_two_scenarios():
+    # ZAM_Tutorial-1_1_T-1.xml and ZAM_Tutorial-1_2_T-1.xml both call their scenario
+    # ZAM_Tutorial-1_1_T-1: the run id's scenario part (file name and hash) keeps them apart.
+    summary = RunSummary("ZAM_Tutorial-1_1_T-1", "ethical", 0, "goal", "")
+    runs = [
+        study_run(RunRecord(f"ZAM_Tutorial-1_{k}_T-1-{k}a{k}b{k}c{k}d{k}e__ethical__s0", summary))
+        for k in (1, 2)
+    ]
+    keys = ["ZAM_Tutorial-1_1_T-1-1a1b1c1d1e", "ZAM_Tutorial-1_2_T-1-2a2b2c2d2e"]
+    assert [r.scenario for r in runs] == keys
+    assert len(analyse(runs, ["ethical"], resamples=10).scenarios) == 2
