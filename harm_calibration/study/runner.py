@@ -318,13 +318,21 @@ def _spec_lines(
     by_scenario: dict[str, list[StudyRun]] = defaultdict(list)
     for r in runs:
         by_scenario[r.scenario].append(r)
-    complete = sum(1 for rs in by_scenario.values() if all(r.outcome != "failed" for r in rs))
     seeds = sorted({r.seed for r in runs})
+    every = {(p, seed) for p in planners for seed in seeds}
+    complete = sum(
+        1
+        for rs in by_scenario.values()
+        if {(r.planner, r.seed) for r in rs} >= every and all(r.outcome != "failed" for r in rs)
+    )
+    partial = sum(1 for rs in by_scenario.values() if not {(r.planner, r.seed) for r in rs} >= every)
     spec = [
         f"{len(runs)} runs: {len(by_scenario)} scenarios x {len(planners)} planners "
         f"({', '.join(planners)}) x seeds {', '.join(map(str, seeds))}; {complete} scenarios ran with "
         f"every planner, {len({r.scenario for r in failed})} had a run that failed in the world, "
-        f"{len(analysis.rejected)} were refused at import. {groups.describe()}.",
+        f"{len(analysis.rejected)} were refused at import"
+        + (f", {partial} lack a run (the study has not finished them)" if partial else "")
+        + f". {groups.describe()}.",
     ]
     if failed:
         spec += ["", "Runs that failed in the world:", ""]
