@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ethical_planner.boundary import edge_impact_speed, physical_view
 from ethical_planner.collision_probability import collides
 from ethical_planner.config import PlannerConfig
 from ethical_planner.cost import (
@@ -329,6 +330,8 @@ class _Evaluation:
 
     Attributes:
         candidates: the cycle's n candidates.
+        physical: the same candidates pressed against the road edge where they cross it
+            (``boundary.physical_view``): what the road users' risks are judged on.
         risk: risk of the m assessed candidates (``risk.rows`` are their indices).
         r_obs, r_ego: their responsibilities, shape (m, k); None if the responsibility
             weight is 0 (then only the chosen plan's are computed, for the record).
@@ -344,6 +347,7 @@ class _Evaluation:
     """
 
     candidates: Candidates
+    physical: Candidates
     risk: RiskAssessment
     r_obs: np.ndarray | None
     r_ego: np.ndarray | None
@@ -433,9 +437,11 @@ class Planner:
         invalid = physically_invalid(candidates, config.vehicle)
         broken = np.logical_or.reduce(list(invalid.values()))
         considered = np.flatnonzero(~broken) if not broken.all() else np.arange(n)
-        tables = prediction_tables(
-            candidates, considered, prediction, self.ego_shape, config.risk.gate_sigmas
-        )
+        # A plan's positions beyond the road edge are not where the car would be: the
+        # road users' risks, predicted collisions and responsibilities are judged on the
+        # plan pressed against the edge (``ethical_planner.boundary``).
+        physical, _ = physical_view(candidates, considered, self.ego_shape, self.environment)
+        tables = prediction_tables(physical, considered, prediction, self.ego_shape, config.risk.gate_sigmas)
         collision = np.zeros(n, dtype=bool)
         collision[considered] = collides(tables, np.arange(considered.size), first_step=1)
         # A plan ending in oncoming traffic's way too late to get out is a predicted
@@ -481,8 +487,16 @@ class Planner:
         def evaluate(rows: np.ndarray) -> _Assessed:
             """Risk, responsibility and cost of candidates ``rows`` (the stage timers run)."""
             clock = _clock()
-            risk = assess_risk(
+            impact = edge_impact_speed(
                 candidates,
+                rows,
+                outside[rows],
+                self.ego_shape,
+                self.environment,
+                config.risk.road_edge_margin,
+            )
+            risk = assess_risk(
+                physical,
                 rows,
                 tables,
                 position[rows],
@@ -494,6 +508,7 @@ class Planner:
                 config.weights.maximin_epsilon,
                 with_onset,
                 self.workers,
+                impact,
             )
             row_levels = _rule_levels(
                 validity_levels(
@@ -511,7 +526,7 @@ class Planner:
             r_obs = r_ego = None
             if with_onset:
                 r_obs, r_ego = responsibilities(
-                    candidates,
+                    physical,
                     rows,
                     risk.peak_probability,
                     risk.onset_step,
@@ -543,6 +558,7 @@ class Planner:
         costs = _full_costs(assessed_part.costs, rows, n)
         return _Evaluation(
             candidates,
+            physical,
             risk,
             assessed_part.r_obs,
             assessed_part.r_ego,
@@ -907,7 +923,7 @@ class Planner:
         config = self.config
         risk, j = chosen.risk, chosen.position(index)
         detail = risk_detail(
-            chosen.candidates,
+            chosen.physical,
             index,
             prediction,
             self.ego_shape,
@@ -920,7 +936,7 @@ class Planner:
         if chosen.r_obs is None:
             # Responsibility carries no weight: the chosen plan's alone, for the record.
             r_obs, r_ego = responsibilities(
-                chosen.candidates,
+                chosen.physical,
                 np.array([index]),
                 *(value[None] for value in collision_onset(p)),
                 prediction,

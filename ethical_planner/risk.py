@@ -48,8 +48,8 @@ class RiskAssessment:
         onset_step: first step at which p_k reaches half its peak, shape (m, k) (with
             ``onset``; 0 otherwise and where p is 0 throughout).
         leaves_road: the footprint leaves the drivable area at some step, shape (m,).
-        boundary_risk: harm of hitting a wall at the first step outside the road (p = 1),
-            shape (m,).
+        boundary_risk: harm of hitting a wall where the candidate leaves the road (p = 1),
+            at its speed into the edge there (``boundary.edge_impact_speed``), shape (m,).
         ego_combined: R_ego(u) = 1 - prod(1 - R_ego,k) incl. the boundary, shape (m,) (Eq. 4).
         triples: (candidate, road user, step) triples that passed the distance gate.
         integrals: collision-probability integrals evaluated among them.
@@ -277,6 +277,7 @@ def assess_risk(
     epsilon: float,
     onset: bool = False,
     workers: Workers | None = None,
+    impact_speed: np.ndarray | None = None,
 ) -> RiskAssessment:
     """Risk of candidates ``rows`` for every road user (Eqs. 3, 4) and maximin's harms.
 
@@ -297,6 +298,9 @@ def assess_risk(
         epsilon: maximin's collision-probability threshold (``CostWeights.maximin_epsilon``).
         onset: also find each pair's highest p and its onset exactly (responsibility).
         workers: threads for large problems (a planner passes its own).
+        impact_speed: each candidate's speed into the road edge where it leaves the
+            road [m/s], shape (m,) (``boundary.edge_impact_speed``); None: its speed
+            at the first step off the road (the paper's head-on wall).
     """
     workers = Workers() if workers is None else workers
     rows = np.asarray(rows, dtype=np.int64)
@@ -309,8 +313,9 @@ def assess_risk(
     boundary = np.zeros(m)
     leaves = outside.any(axis=1)
     if config.boundary_harm and m:
-        first = outside.argmax(axis=1)
-        boundary = np.where(leaves, boundary_harm(candidates.v[rows, first]), 0.0)
+        if impact_speed is None:
+            impact_speed = candidates.v[rows, outside.argmax(axis=1)]
+        boundary = np.where(leaves, boundary_harm(impact_speed), 0.0)
     survive = np.prod(1.0 - maximum.risk_ego, axis=1) * (1.0 - boundary)
     return RiskAssessment(
         rows=rows,

@@ -19,6 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ethical_planner import collision_probability as cp
+from ethical_planner.boundary import edge_impact_speed, physical_view
 from ethical_planner.collision_probability import (
     collision_probability,
     gate,
@@ -253,6 +254,9 @@ def _brute_force_decision(planner, situation):
     cand = sample_candidates(start, env.reference_path, config.sampling, config.vehicle)
     pred = planner.predictor.predict(situation.road_users, cand.t)
     pred = pred.with_covariance_floor(config.prediction.covariance_floor)
+    plan = cand
+    # Road users meet the plans pressed against the road edge (tested in test_boundary.py).
+    cand, _ = physical_view(plan, np.arange(plan.n_traj), EGO_SHAPE, env)
     full = prediction_collision_probability(cand, pred, EGO_SHAPE, config.risk.gate_sigmas)
     p = full.probability
     n = p.shape[0]
@@ -277,14 +281,16 @@ def _brute_force_decision(planner, situation):
     )
     risk_obs = (p * harm.harm_obs).max(axis=2, initial=0.0)
     risk_ego = (p * harm.harm_ego).max(axis=2, initial=0.0)
-    outside = outside_drivable_area(cand, EGO_SHAPE, env, config.risk.road_edge_margin)
+    margin = config.risk.road_edge_margin
+    outside = outside_drivable_area(plan, EGO_SHAPE, env, margin)
     leaves = outside.any(axis=1)
-    boundary = np.where(leaves, boundary_harm(cand.v[np.arange(n), outside.argmax(axis=1)]), 0.0)
+    impact = edge_impact_speed(plan, np.arange(n), outside, EGO_SHAPE, env, margin)
+    boundary = np.where(leaves, boundary_harm(impact), 0.0)
     ego_combined = 1.0 - np.prod(1.0 - risk_ego, axis=1) * (1.0 - boundary)
-    invalid = physically_invalid(cand, config.vehicle)
+    invalid = physically_invalid(plan, config.vehicle)
     max_risk = config.risk.max_acceptable_risk
     # Terminal safety (tested by hand in test_terminal.py) is part of level 1.
-    terminal = terminally_unsafe(cand, pred, env, EGO_SHAPE, config.terminal)
+    terminal = terminally_unsafe(plan, pred, env, EGO_SHAPE, config.terminal)
     overlap = full.mean_overlap | terminal[:, None, None]
     levels = validity_levels(invalid, overlap, outside, risk_obs, ego_combined, max_risk)
     corridors = LegalCorridors.of(situation.road_users, env)
@@ -300,10 +306,10 @@ def _brute_force_decision(planner, situation):
     counted_set = np.concatenate([pairs, pairs, leaves[:, None]], axis=1)
     risks, present = risk_set(risk_obs, risk_ego, boundary, leaves)
     r = np.concatenate([r_obs, r_ego, np.zeros((n, 1))], axis=1)
-    speed = np.abs(cand.v - planner.desired_speed).mean(axis=1)
-    path = path_deviation(cand.d, env.lane_offsets, env.lane_width, weights.path_reference)
+    speed = np.abs(plan.v - planner.desired_speed).mean(axis=1)
+    path = path_deviation(plan.d, env.lane_offsets, env.lane_width, weights.path_reference)
     risk_terms = (risks, present, r, harms, counted_set, ego_combined)
-    costs = total_cost(*risk_terms, cand.jerk_lon, cand.jerk_lat, speed, *path, levels, weights)
+    costs = total_cost(*risk_terms, plan.jerk_lon, plan.jerk_lat, speed, *path, levels, weights)
     in_level = np.flatnonzero(levels == levels.max())
     order = np.lexsort((costs.comfort[in_level] + costs.mobility[in_level], costs.total[in_level]))
     return levels, in_level[order[0]], costs
