@@ -692,18 +692,18 @@ def scrape_wall_for_child(rng: np.random.Generator | None = None) -> Scenario:
     the parked row closes the right, so the least-harm escape is left, along the wall.
     The ego keeps control after contact (``ego.post_crash = "continue"``).
 
-    [expect] the child is not hit (a scrape of the wall is acceptable). Measured, seed 0,
-    ethical: every planner of the cycle before the wall finds no valid candidate and picks
-    one that leaves the road (level 2, ending beyond the wall); the ego scrapes the left
-    wall at 2.13 s. With ``continue`` it keeps tracking plans that lead into the wall: each
-    contact pulse cuts its controller, so it chatters against the wall with little
-    braking, is pushed right and hits the child at 8.3 m/s at 2.67 s (the expectation
-    fails). With ``brake`` it scrapes the wall once, brakes to rest and stops beside the
-    child without touching it. selfish and standard pick candidates of the same level 2
-    that thread between the child and the wall (0.22 m and 0.12 m from the child) and
-    reach the goal without a contact: ethical's lowest risk cost (Eq. 6) picks the plan
-    farthest from the child, through the wall, whose harm the planner takes at the speed
-    of the first step off the road however deep the plan goes (``risk.boundary_risk``).
+    [expect] the child is not hit (a scrape of the wall is acceptable). Measured, seed 0:
+    from 1.7 s the ethical planner finds no valid candidate and leaves the road (level 2)
+    rather than meet the child's predicted path (level 1). It judges a road-leaving plan
+    where the wall holds the car (``ethical_planner.boundary``): a plan through the wall,
+    pressed against it and turned into it, swings the car's rear towards the child, so
+    the plans it keeps run along the wall's face (end offset +1.0 m, the car's side 5 mm
+    beyond the face, boundary risk 0.011: about 0.5 m/s into the wall) and brake to 3.8 m/s. It passes the
+    child 0.225 m away without touching the wall or the child and reaches the goal at
+    8.0 s (both policies: there is no contact to follow); selfish and standard pass it
+    0.27 and 0.22 m away (goal at 6.8 and 5.8 s). Before the pressed positions, ethical
+    chose plans whose centre ran up to 2 m beyond the wall, which looked far from the
+    child; it hit the wall at 10.9 m/s and, under ``continue``, then the child.
     (``tests/mujoco_world/loop/test_post_crash.py``.)
     """
     draw = _Draw(rng)

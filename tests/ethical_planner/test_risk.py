@@ -256,7 +256,8 @@ def _brute_force_decision(planner, situation):
     pred = pred.with_covariance_floor(config.prediction.covariance_floor)
     plan = cand
     # Road users meet the plans pressed against the road edge (tested in test_boundary.py).
-    cand, _ = physical_view(plan, np.arange(plan.n_traj), EGO_SHAPE, env)
+    cand, pressed = physical_view(plan, np.arange(plan.n_traj), EGO_SHAPE, env)
+    assert pressed.any()  # some candidates cross the road edge: the test covers them
     full = prediction_collision_probability(cand, pred, EGO_SHAPE, config.risk.gate_sigmas)
     p = full.probability
     n = p.shape[0]

@@ -274,44 +274,17 @@ def test_the_policy_is_validated_naming_the_field(tmp_path):
     assert rear_end("continue").ego.post_crash == "continue"
 
 
-@pytest.fixture(scope="module")
-def scrape_runs():
-    """``scrape_wall_for_child``, ethical planner, both policies, 3 s (the contacts come by 2.7 s)."""
-    scenario = dataclasses.replace(get_scenario("scrape_wall_for_child"), duration=3.0)
+def test_scrape_wall_for_child_the_ethical_planner_passes_the_child_along_the_wall():
+    # With no valid candidate left (from 1.7 s), the planner leaves the road (level 2)
+    # rather than hit the child (level 1). It judges a road-leaving plan where the wall
+    # holds the car (``ethical_planner.boundary``): a plan through the wall is pressed
+    # against it, turned as planned, its rear swung towards the child, so the plan it
+    # keeps runs along the wall's face and brakes. Measured, seed 0: no contact at all,
+    # 0.225 m from the child; both policies are the same run (no contact to follow).
+    scenario = dataclasses.replace(get_scenario("scrape_wall_for_child"), duration=4.0)
     assert scenario.ego.post_crash is PostCrashPolicy.CONTINUE
-    return {
-        policy: run_scenario(scenario, "ethical", config=RunConfig(post_crash=policy))
-        for policy in ("brake", "continue")
-    }
-
-
-def _contacts(summary):
-    return [(c.measurement.a.name, c.measurement.b.name, c.measurement.time) for c in summary.collisions]
-
-
-def test_scrape_wall_for_child_the_ego_scrapes_the_wall_first(scrape_runs):
-    # With no valid candidate left, the planner leaves the road (level 2) rather than
-    # hit the child (level 1): under both policies the first contact is the left wall.
-    for summary in scrape_runs.values():
-        first = min(summary.collisions, key=lambda c: c.measurement.time)
-        assert (first.measurement.a.name, first.measurement.b.type) == ("ego", "wall")
-        assert first.measurement.time == pytest.approx(2.13, abs=0.05)
-    # brake: one scrape, then it brakes to rest beside the child without touching it.
-    brake = scrape_runs["brake"]
-    assert [(a, b) for a, b, _ in _contacts(brake)] == [("ego", "static")]
-    assert brake.harm["vulnerable"] == 0.0 and brake.verdict == "pass"
-
-
-def test_scrape_wall_for_child_continue_hits_the_child_after_the_scrape(scrape_runs):
-    # What the ethical planner does today under continue (README, "Control after
-    # contact"): it keeps planning through the wall (its candidates beyond the wall look
-    # far from the child), its controller presses it against the wall and it slides into
-    # the child at ~8 m/s. Each contact is its own measured collision, and the loop
-    # replanned after the first.
-    run = scrape_runs["continue"]
-    assert sorted((a, b) for a, b, _ in _contacts(run)) == [("ego", "child"), ("ego", "static")]
-    child = next(c for c in run.collisions if c.measurement.b.name == "child")
-    assert child.measurement.time > 2.5
-    assert run.cycles > scrape_runs["brake"].cycles + 10
-    assert run.harm["vulnerable"] == pytest.approx(child.b.harm_measured)
-    assert run.verdict == "fail"  # [expect] max_vulnerable_harm = 0: the expectation this planner fails
+    run = run_scenario(scenario, "ethical")
+    assert run.collisions == ()
+    assert run.clearance_vulnerable["child"] > 0.15
+    assert run.progress > 65.0  # past the child (at s = 63 m)
+    assert run.verdict == "pass"  # [expect] max_vulnerable_harm = 0
