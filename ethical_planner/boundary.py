@@ -36,6 +36,7 @@ import shapely
 
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.geometry import rectangle_corners
+from ethical_planner.jit import kernel
 from ethical_planner.risk import outside_drivable_area
 from ethical_planner.road_users import Shape
 from ethical_planner.sampling import Candidates
@@ -44,6 +45,57 @@ from ethical_planner.sampling import Candidates
 _PASSES = 2
 #: Shifts below this are none [m] (a corner on the edge).
 _MIN_SHIFT = 1e-9
+#: A pushed-back corner goes this much further than the edge, to lie inside [m].
+_NUDGE = 1e-9
+#: The edge's polyline is simplified within this tolerance [m] before the nearest-point
+#: search: a road's edge sampled every metre along a straight line becomes one segment.
+_EDGE_TOLERANCE = 0.005
+_EDGES: dict[int, tuple[object, np.ndarray]] = {}
+
+
+def _edge_segments(area: shapely.Geometry) -> np.ndarray:
+    """The area's boundary (holes included) as segments (x0, y0, x1, y1), shape (m, 4), cached per area."""
+    cached = _EDGES.get(id(area))
+    if cached is None or cached[0] is not area:
+        if len(_EDGES) >= 8:
+            _EDGES.clear()
+        simple = shapely.simplify(area, _EDGE_TOLERANCE)
+        rings = [r for part in getattr(simple, "geoms", (simple,)) for r in (part.exterior, *part.interiors)]
+        segments = np.concatenate(
+            [np.concatenate([c[:-1], c[1:]], axis=1) for c in (np.asarray(r.coords) for r in rings)]
+        )
+        # The entry keeps ``area`` alive, so its id cannot be reused while cached.
+        cached = _EDGES[id(area)] = (area, np.ascontiguousarray(segments))
+    return cached[1]
+
+
+@kernel
+def _nearest_on_segments(
+    px: np.ndarray, py: np.ndarray, segments: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest point on any segment of each point: a scan of every segment per point.
+
+    Args:
+        px, py: points [m], shape (q,).
+        segments: (x0, y0, x1, y1) [m], shape (m, 4), m >= 1, no segment of zero length.
+
+    Returns:
+        (qx, qy) [m], shape (q,) each.
+    """
+    q = px.size
+    qx, qy = np.empty(q), np.empty(q)
+    for i in range(q):
+        best = np.inf
+        for j in range(segments.shape[0]):
+            ax, ay = segments[j, 0], segments[j, 1]
+            ux, uy = segments[j, 2] - ax, segments[j, 3] - ay
+            t = ((px[i] - ax) * ux + (py[i] - ay) * uy) / (ux * ux + uy * uy)
+            t = min(max(t, 0.0), 1.0)
+            nx, ny = ax + t * ux, ay + t * uy
+            d = (px[i] - nx) ** 2 + (py[i] - ny) ** 2
+            if d < best:
+                best, qx[i], qy[i] = d, nx, ny
+    return qx, qy
 
 
 def push_back(
@@ -52,7 +104,8 @@ def push_back(
     """Shift of each footprint's centre that brings it inside the drivable area.
 
     Per pass, the corner deepest beyond the edge is moved to its nearest point on the
-    edge (the drivable area's boundary, holes included); that vector shifts the centre.
+    edge (the drivable area's boundary, holes included, simplified within 5 mm); that
+    vector shifts the centre.
 
     Args:
         x, y, yaw: footprint poses [m, m, rad], shape (q,).
@@ -63,21 +116,28 @@ def push_back(
         (dx, dy) [m], shape (q,) each; 0 for a footprint inside the area.
     """
     area = environment.drivable_area
-    boundary = area.boundary
     dx, dy = np.zeros(x.shape), np.zeros(x.shape)
+    active = np.arange(x.size)
     for _ in range(_PASSES):
-        cx, cy = rectangle_corners(x + dx, y + dy, yaw, shape.length, shape.width)  # (q, 4)
-        out = ~shapely.contains_xy(area, cx, cy)
-        if not out.any():
+        cx, cy = rectangle_corners(
+            x[active] + dx[active], y[active] + dy[active], yaw[active], shape.length, shape.width
+        )
+        out = ~shapely.contains_xy(area, cx, cy)  # (q, 4)
+        hit = out.any(axis=1)
+        if not hit.any():
             break
-        points = shapely.points(cx[out], cy[out])
-        nearest = shapely.line_interpolate_point(boundary, shapely.line_locate_point(boundary, points))
-        px, py = shapely.get_coordinates(nearest).T
+        active, cx, cy, out = active[hit], cx[hit], cy[hit], out[hit]
+        px, py = _nearest_on_segments(cx[out], cy[out], _edge_segments(area))
         ex, ey = np.zeros(cx.shape), np.zeros(cx.shape)
         ex[out], ey[out] = px - cx[out], py - cy[out]
         deepest = np.argmax(ex * ex + ey * ey, axis=1)[:, None]
-        dx += np.take_along_axis(ex, deepest, axis=1)[:, 0]
-        dy += np.take_along_axis(ey, deepest, axis=1)[:, 0]
+        sx = np.take_along_axis(ex, deepest, axis=1)[:, 0]
+        sy = np.take_along_axis(ey, deepest, axis=1)[:, 0]
+        # A hair further, so that the corner lies inside rather than on the edge (where
+        # the point-in-polygon test is slow and says "outside").
+        scale = 1.0 + _NUDGE / np.maximum(np.hypot(sx, sy), _NUDGE)
+        dx[active] += sx * scale
+        dy[active] += sy * scale
     return dx, dy
 
 

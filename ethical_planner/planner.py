@@ -439,8 +439,12 @@ class Planner:
         considered = np.flatnonzero(~broken) if not broken.all() else np.arange(n)
         # A plan's positions beyond the road edge are not where the car would be: the
         # road users' risks, predicted collisions and responsibilities are judged on the
-        # plan pressed against the edge (``ethical_planner.boundary``).
-        physical, _ = physical_view(candidates, considered, self.ego_shape, self.environment)
+        # plan pressed against the edge (``ethical_planner.boundary``). Only a plan within
+        # the edge margin after the present step can cross the edge itself.
+        margin = config.risk.road_edge_margin
+        near_edge = outside_drivable_area(candidates, self.ego_shape, self.environment, margin, considered)
+        leaving = considered[near_edge[:, 1:].any(axis=1)]
+        physical, _ = physical_view(candidates, leaving, self.ego_shape, self.environment)
         tables = prediction_tables(physical, considered, prediction, self.ego_shape, config.risk.gate_sigmas)
         collision = np.zeros(n, dtype=bool)
         collision[considered] = collides(tables, np.arange(considered.size), first_step=1)
@@ -452,9 +456,7 @@ class Planner:
         collision[considered] |= terminal[considered]
         outside = np.zeros((n, n_t), dtype=bool)
         on_road = considered[~collision[considered]]
-        outside[on_road] = outside_drivable_area(
-            candidates, self.ego_shape, self.environment, config.risk.road_edge_margin, on_road
-        )
+        outside[on_road] = near_edge[~collision[considered]]
         if outside[on_road, 0].any():
             # The ego is within the edge margin now: the margin is not judged until the
             # plan has cleared it (the road edge itself is, from the first step on).
