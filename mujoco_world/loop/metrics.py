@@ -22,7 +22,6 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from ethical_planner.config import VehicleConfig
 from ethical_planner.geometry import rectangle_overlap
 from ethical_planner.road_users import VULNERABLE_TYPES, RoadUserType
 from ethical_planner.sampling import FrenetState
@@ -399,17 +398,19 @@ class RuleViolations(Metric):
       stood still (speed below ``STANDSTILL_MPS``) while its front was within
       ``stop_zone`` before the line is a ``stop_sign`` violation. A line is judged
       once, when first crossed. A crossing on red that the ego could no longer avoid
-      when the light turned red (its stopping distance at the emergency deceleration,
-      8 m/s^2 after the jerk ramp, ``traffic_rules.stop_distance``, exceeded its gap to
-      the line at the first sample in the red) is the planner's dilemma zone: it is
-      not a violation and is listed in ``amber_crossings`` instead.
+      when the light turned red (its stopping distance at the emergency deceleration
+      after the jerk ramp, ``traffic_rules.stop_distance``, exceeded its gap to the
+      line at the first sample in the red) is the planner's dilemma zone: it is not a
+      violation and is listed in ``amber_crossings`` instead. The emergency
+      deceleration (8 m/s^2 by default), the jerk and ``pass_lookahead`` (below) are
+      the ego planner's (``RunState.planner_config``: ``vehicle``, ``traffic_rules``).
     - Lane markings (``World.lane_extent``, the footprint's offsets across the ego's
       route): each time the footprint reaches more than ``LANE_TOLERANCE_M`` beyond an
       outer lane edge it is a ``shoulder`` violation (line ``right`` or ``left``);
       each time it reaches that far across the centre line while any part of it lies
       in a no-overtaking zone, and did not a sample before, a ``no_overtaking``
       violation (line: the zone's name), unless debris or a road user slower than the
-      zone's ``pass_below`` lay in the ego's lane within ``PASS_LOOKAHEAD_M`` ahead
+      zone's ``pass_below`` lay in the ego's lane within ``pass_lookahead`` ahead
       (``traffic_rules.lane_blocked``, as the planner asks it: ``passing``). Either
       entry is ``evasive`` if the ego kept in its lane and braking at
       ``EVASIVE_DECELERATION`` would still hit a road user or debris within
@@ -439,6 +440,8 @@ class RuleViolations(Metric):
         self.amber: list[dict[str, Any]] = []
         self.excused: list[dict[str, Any]] = []
         world = run.world
+        self.vehicle = run.planner_config.vehicle
+        self.pass_lookahead = run.planner_config.traffic_rules.pass_lookahead
         self.environment = world.environment()
         environment = self.environment
         self.zones = environment.no_overtaking
@@ -463,7 +466,7 @@ class RuleViolations(Metric):
         red = np.array([line.red_at(t) for line in self.red], dtype=bool)  # a few lines
         onset = red & ~self.was_red & ~self.crossed
         if onset.any():
-            vehicle = VehicleConfig()
+            vehicle = self.vehicle
             accel = float(world.accelerations_along_heading()[0])
             state = FrenetState(s=front, s_dot=speed, s_ddot=accel, d=0.0, d_dot=0.0, d_ddot=0.0)
             stop = float(
@@ -510,7 +513,7 @@ class RuleViolations(Metric):
                 world.scene.speeds()[others],
                 world.widths[others],
                 self.zones[zone].pass_below,
-                PASS_LOOKAHEAD_M,
+                self.pass_lookahead,
             )
             self._entry(
                 world, "no_overtaking", self.zone_names[zone], s, speed, "passing" if passing else None
@@ -595,9 +598,6 @@ LANE_TOLERANCE_M = 0.1
 #: [m/s^2, s] (``_stays_in_lane_and_collides``).
 EVASIVE_DECELERATION = 6.0
 EVASIVE_HORIZON_S = 3.0
-#: How far ahead of the ego's front a slow obstacle excuses a crossing in a no-overtaking zone [m]
-#: (the planner's ``TrafficRulesConfig.pass_lookahead``).
-PASS_LOOKAHEAD_M = 40.0
 
 
 class ScriptEvents(Metric):

@@ -28,6 +28,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ethical_planner.config import PlannerConfig
 from ethical_planner.harm import DEFAULT_MODEL, DEFAULT_PEDESTRIAN_MODEL
 from ethical_planner.prediction import Predictor
 from ethical_planner.road_users import Shape
@@ -161,7 +162,9 @@ class ClosedLoop:
         self.planar_model = getattr(self.planner, "planar_model", (None, None))
         self.world = world
         self.rng = np.random.default_rng(seed)
-        self.run = RunState(world, scenario, str(self.planner.name), int(seed))
+        own = getattr(self.planner, "config", None)
+        own = own if isinstance(own, PlannerConfig) else PlannerConfig()
+        self.run = RunState(world, scenario, str(self.planner.name), int(seed), planner_config=own)
         self.rules = (*rules, TimeLimit(config.stall))
         self.metrics = tuple(metrics)
         self.timing = {"planning": 0.0, "measurement": 0.0}

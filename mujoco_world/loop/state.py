@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ethical_planner.config import PlannerConfig
 from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.loop.world import World
 from mujoco_world.scenario.spec import Scenario
@@ -26,6 +27,9 @@ class RunState:
         collisions: collisions measured so far, in the order their episodes ended.
         crash_time: simulated time of the first contact that counts as a crash (see
             ``rules.CrashCriterion``) [s]; None before.
+        planner_config: the ego planner's configuration (its ``config`` if it has a
+            ``PlannerConfig``, the default otherwise): the vehicle and traffic-rule
+            settings the world's rule judge measures the ego by.
     """
 
     world: World
@@ -36,6 +40,7 @@ class RunState:
     cycles: int = 0
     collisions: list[ImpactRecord] = field(default_factory=list)
     crash_time: float | None = None
+    planner_config: PlannerConfig = field(default_factory=PlannerConfig)
 
     @property
     def time(self) -> float:

@@ -6,10 +6,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ethical_planner.config import preset
+from ethical_planner.config import PlannerConfig, TrafficRulesConfig, VehicleConfig, preset
 from ethical_planner.environment import StopLine
 from mujoco_world.loop.metrics import RuleViolations
-from mujoco_world.loop.runner import run_scenario
+from mujoco_world.loop.runner import closed_loop, run_scenario
 from mujoco_world.loop.world import World
 from mujoco_world.scenario.catalog import get_scenario
 from mujoco_world.scenario.spec import StopLineSpec, scenario_from_dict
@@ -36,11 +36,11 @@ class _Ego:
         return SimpleNamespace(no_overtaking=(), lane_edges=None, centre_line=None)
 
 
-def _judge(lines, motion, values=False):
+def _judge(lines, motion, values=False, planner_config=None):
     """Violations of an ego driving ``motion`` (time, centre s, speed) past ``lines`` (or all values)."""
     world = _Ego()
     scenario = SimpleNamespace(stop_lines=tuple(lines), road=SimpleNamespace(no_overtaking=()))
-    run = SimpleNamespace(world=world, scenario=scenario)
+    run = SimpleNamespace(world=world, scenario=scenario, planner_config=planner_config or PlannerConfig())
     metric = RuleViolations()
     metric.start(run)
     for t, s, v in motion:
@@ -77,6 +77,26 @@ def test_a_crossing_the_ego_could_not_stop_for_when_the_light_turned_is_amber_no
     out = _judge([StopLineSpec("light", s=50.0, red=((4.0, 9.0),))], _drive(10.0), values=True)
     (v,) = out["rule_violations"]
     assert v.rule == "red_light" and "amber_crossings" not in out
+
+
+def test_the_dilemma_zone_is_measured_with_the_planner_s_vehicle():
+    # The amber case above (red from 4.1 s, 7.0 m to the line at 10 m/s) with a planner whose
+    # vehicle brakes at 12 m/s^2 after a 30 m/s^3 ramp: 0.4 s and 10 x 0.4 - 30 x 0.4^3 / 6 =
+    # 3.68 m, down to 7.6 m/s, then 7.6^2 / 24 = 2.41 m: 6.09 m < 7.0 m, it could have stopped.
+    light = StopLineSpec("light", s=50.0, red=((4.1, 9.0),))
+    strong = PlannerConfig(vehicle=VehicleConfig(emergency_deceleration=12.0))
+    out = _judge([light], _drive(10.0), values=True, planner_config=strong)
+    (v,) = out["rule_violations"]
+    assert v.rule == "red_light" and "amber_crossings" not in out
+
+
+def test_the_run_hands_the_planner_s_configuration_to_the_judge():
+    scenario = dataclasses.replace(get_scenario("red_light_for_ego"), duration=0.2)
+    config = dataclasses.replace(preset("selfish"), vehicle=VehicleConfig(emergency_deceleration=9.0))
+    loop = closed_loop(scenario, config)
+    assert loop.run.planner_config is loop.planner.config
+    assert loop.run.planner_config.vehicle.emergency_deceleration == 9.0
+    assert closed_loop(scenario, "keep_lane").run.planner_config == PlannerConfig()
 
 
 def test_a_stop_sign_needs_a_standstill_within_its_zone():
@@ -198,9 +218,11 @@ def _zone_world(users=()):
     )
 
 
-def _judge_poses(world, poses):
+def _judge_poses(world, poses, planner_config=None):
     """The world's judge on an ego placed at ``poses`` (time, x, y) in turn (the ego lane is y = -1.75 m)."""
-    run = SimpleNamespace(world=world, scenario=world.scenario)
+    run = SimpleNamespace(
+        world=world, scenario=world.scenario, planner_config=planner_config or PlannerConfig()
+    )
     metric = RuleViolations()
     metric.start(run)
     for t, x, y in poses:
@@ -243,6 +265,9 @@ def test_passing_a_standing_car_in_the_zone_is_not_overtaking():
     # Beyond the 40 m lookahead (front 64.25 + 40 = 104.25 m) it does not excuse the crossing.
     far = dict(stalled, s0=110.0)
     assert [v.rule for v in _judge_poses(_zone_world([far]), poses)] == ["no_overtaking"]
+    # The lookahead is the planner's (traffic_rules.pass_lookahead): 50 m reach 114.25 m.
+    config = PlannerConfig(traffic_rules=TrafficRulesConfig(pass_lookahead=50.0))
+    assert _judge_poses(_zone_world([far]), poses, config) == ()
 
 
 def test_zones_are_validated_by_name():
@@ -316,7 +341,7 @@ def test_an_evasive_move_onto_the_shoulder_is_excused():
 
     poses = [(0.0, 60.0, -1.75), (0.1, 60.0, -3.0)]
     world = _zone_world([ghost(85.0)])
-    run = SimpleNamespace(world=world, scenario=world.scenario)
+    run = SimpleNamespace(world=world, scenario=world.scenario, planner_config=PlannerConfig())
     metric = RuleViolations()
     metric.start(run)
     for t, x, y in poses:
