@@ -160,6 +160,11 @@ def check_plausible(owner: str, record: object) -> None:
                 raise ValueError(f"{key} must lie in [{low:g}, {high:g}] {unit}, got {v!r}")
 
 
+#: A merge road's default lane drop and taper [m] (``RoadSpec.lane_drop``, ``taper``).
+MERGE_LANE_DROP_M = 150.0
+MERGE_TAPER_M = 50.0
+
+
 class RoadKind(StrEnum):
     """Road layout."""
 
@@ -304,10 +309,11 @@ class RoadSpec:
         lead_in: straight before the arc [m] (curved only).
         corner_radius: kerb radius at the intersection corners [m].
         map: the road's geometry (``kind = "map"`` only).
-        lane_drop: merge roads: arc length along the main road where the acceleration
-            lane (lane 0, the right-most) has ended [m].
-        taper: merge roads: length of the taper before ``lane_drop`` over which the
-            acceleration lane narrows from full width to nothing [m].
+        lane_drop: merge roads only: arc length along the main road where the
+            acceleration lane (lane 0, the right-most) has ended [m] (default 150).
+        taper: merge roads only: length of the taper before ``lane_drop`` over which
+            the acceleration lane narrows from full width to nothing [m] (default 50).
+            Either on another kind of road is refused by name (None there).
         no_overtaking: no-overtaking zones of the main road (``NoOvertakingSpec``); they
             need lanes in both directions. Unnamed zones are named ``no_overtaking_<i>``.
     """
@@ -326,8 +332,8 @@ class RoadSpec:
     lead_in: float = 40.0
     corner_radius: float = 8.0
     map: MapSpec | None = None
-    lane_drop: float = 150.0
-    taper: float = 50.0
+    lane_drop: float | None = None
+    taper: float | None = None
     no_overtaking: tuple[NoOvertakingSpec, ...] = ()
 
     def __post_init__(self) -> None:
@@ -410,6 +416,10 @@ class RoadSpec:
                 f"({self.lead_in + self.arc_length:.1f} m)",
             )
         if self.kind is RoadKind.MERGE:
+            if self.lane_drop is None:
+                object.__setattr__(self, "lane_drop", MERGE_LANE_DROP_M)
+            if self.taper is None:
+                object.__setattr__(self, "taper", MERGE_TAPER_M)
             check(
                 self.lanes >= 2,
                 f"road.lanes of a merge road counts the acceleration lane and the main road's lanes "
@@ -419,6 +429,13 @@ class RoadSpec:
                 self.taper < self.lane_drop <= self.length - 10.0,
                 f"road.lane_drop ({self.lane_drop:g} m) must lie after road.taper ({self.taper:g} m) and "
                 f"at least 10 m before the road's end ({self.length:g} m)",
+            )
+        else:
+            given = [name for name in ("lane_drop", "taper") if getattr(self, name) is not None]
+            check(
+                not given,
+                f"road.{given[0] if given else ''} is only allowed with road.kind = 'merge' (an on-ramp's "
+                f"acceleration lane), not {self.kind.value!r}",
             )
         if self.kind is RoadKind.INTERSECTION:
             check(

@@ -279,6 +279,13 @@ def _user(behaviour, route=None):
         ),
         ({"kind": "merge", "taper": 0.5}, None, "road.taper must lie in [1, 1000] m"),
         (
+            {"lane_drop": 120.0},
+            None,
+            "road.lane_drop is only allowed with road.kind = 'merge' (an on-ramp's acceleration lane), "
+            "not 'straight'",
+        ),
+        ({"kind": "curved", "taper": 30.0}, None, "road.taper is only allowed with road.kind = 'merge'"),
+        (
             {"kind": "merge", "lanes": 3, "lanes_forward": 2},
             None,
             "road.lanes_forward of a merge road must be",
@@ -366,3 +373,10 @@ def test_a_plain_idm_car_stops_at_the_lane_end_a_mobil_car_merges():
     merging, hits = world({"kind": "idm", "speed": 15.0, "mobil": {}})
     assert hits == [] and merging.fleet.d[0] == pytest.approx(3.5)
     assert [(a, b) for _, _, a, b in merging.fleet.lane_changes] == [(0, 1)]
+
+
+def test_a_merge_road_gets_the_default_lane_drop_and_taper_other_roads_none():
+    merge = scenario_from_dict({"name": "m", "road": {"kind": "merge", "lanes": 3, "length": 300.0}}).road
+    assert (merge.lane_drop, merge.taper) == (150.0, 50.0)
+    straight = scenario_from_dict({"name": "s"}).road
+    assert (straight.lane_drop, straight.taper) == (None, None)
