@@ -32,7 +32,6 @@ from mujoco_world.agents.mobil import (
     SIDES,
     IdmParameters,
     LaneLayout,
-    MobilDecision,
     Neighbours,
     lane_neighbours,
     mobil_accelerations,
@@ -269,8 +268,6 @@ class Fleet:
         #: Lane changes MOBIL made: (time [s], road user index, from lane, to lane), lanes
         #: from the right in its direction.
         self.lane_changes: list[tuple[float, int, int, int]] = []
-        #: The last tick's MOBIL decision of the MOBIL road users (rows ``flatnonzero(mobil)``).
-        self.last_mobil: MobilDecision | None = None
         # The lane end on each road user's route lane (a standing obstacle), along the main road [m].
         self.route_lane_end = (
             lanes.end_of(self.route_lane, self.direction) if lanes is not None else np.full(self.k, np.inf)
@@ -950,7 +947,6 @@ def _change_lanes(fleet: Fleet, rows: np.ndarray, view: WorldView) -> tuple[np.n
         accelerations = mobil_accelerations(nb_blind, me, v, idm, *rule).blend(accelerations, weight)
     decision = mobil_decide(accelerations, allowed, p["politeness"], p["threshold"], p["b_safe"],
                             p["bias_right"], ready)  # fmt: skip
-    fleet.last_mobil = decision
     for r in np.flatnonzero(decision.change):
         i = int(rows[r])
         d0 = float(fleet.d[i])

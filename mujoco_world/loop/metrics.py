@@ -621,20 +621,25 @@ class ScriptEvents(Metric):
 class LaneChanges(Metric):
     """The lane changes MOBIL road users made (``BehaviourSpec.mobil``).
 
-    Value: ``lane_changes``, a list of (road user name, time [s], from lane, to lane),
-    lanes from the right in the road user's direction; nothing for scenarios without
-    MOBIL road users.
+    Values: ``lane_changes``, a list of (road user name, time [s], from lane, to lane),
+    lanes from the right in the road user's direction, and ``lane_changes_per_user``,
+    the number of changes of every MOBIL road user by name (0 for one that kept its
+    lane); nothing for scenarios without MOBIL road users.
     """
 
     def values(self, run: RunState) -> dict[str, Any]:
-        """``lane_changes`` in ``extra_metrics``."""
+        """``lane_changes`` and ``lane_changes_per_user`` in ``extra_metrics``."""
         fleet = run.world.fleet
         if not fleet.k or not fleet.mobil.any():
             return {}
+        per_user = {fleet.specs[i].name: 0 for i in np.flatnonzero(fleet.mobil)}
+        for _, i, _, _ in fleet.lane_changes:
+            per_user[fleet.specs[i].name] += 1
         return {
             "lane_changes": [
                 (fleet.specs[i].name, round(t, 6), start, end) for t, i, start, end in fleet.lane_changes
-            ]
+            ],
+            "lane_changes_per_user": per_user,
         }
 
 

@@ -17,6 +17,7 @@ from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.metrics import (
     TOP_RISKS,
     HarmPerGroup,
+    LaneChanges,
     Metric,
     MinDistance,
     RiskByType,
@@ -406,3 +407,16 @@ def test_rules_without_an_interval_are_rejected():
 
     with pytest.raises(ValueError, match="interval"):
         run_scenario(dataclasses.replace(head_on_beside_the_ego(), duration=0.1), rules=(Broken(),))
+
+
+def test_lane_changes_are_counted_per_mobil_road_user():
+    # Three road users, two with MOBIL ("a" changed twice, "c" never); "b" keeps its lane without MOBIL.
+    specs = tuple(SimpleNamespace(name=name) for name in ("a", "b", "c"))
+    fleet = SimpleNamespace(
+        k=3, specs=specs, mobil=np.array([True, False, True]), lane_changes=[(1.0, 0, 0, 1), (6.5, 0, 1, 0)]
+    )
+    values = LaneChanges().values(SimpleNamespace(world=SimpleNamespace(fleet=fleet)))
+    assert values["lane_changes"] == [("a", 1.0, 0, 1), ("a", 6.5, 1, 0)]
+    assert values["lane_changes_per_user"] == {"a": 2, "c": 0}
+    fleet.mobil[:] = False
+    assert LaneChanges().values(SimpleNamespace(world=SimpleNamespace(fleet=fleet))) == {}
