@@ -351,7 +351,13 @@ def test_chosen_candidate_parameters_match_the_executed_plan(hidden_pedestrian_r
             assert end_speed[c] == pytest.approx(plan.v[-1], abs=1e-6)
             assert end_offset[c] == pytest.approx(d_end, abs=0.02)
             assert 0.0 < horizon[c] <= plan.t[-1] + 1e-9
+        if chosen.kind == CandidateKind.BRAKE:
+            # A braking candidate targets a stop and never ends faster than it starts
+            # (continuations and grid candidates may speed up).
+            assert end_speed[c] == 0.0 and plan.v[-1] <= plan.v[0] + 1e-6
         assert family[c] == int(decision.candidate.kind)
+    # The run chooses braking candidates, so the check above is exercised.
+    assert any(d.candidate.kind == CandidateKind.BRAKE for d in probe.decisions)
 
 
 def test_plan_switch_flags_a_plan_that_does_not_continue_the_previous_one(hidden_pedestrian_run):
