@@ -548,8 +548,10 @@ class TrafficRulesConfig:
             validity hierarchy lets a shoulder plan win when every plan in the lanes is
             invalid or above R_max (to avoid a crash). Off by default: switched on, it
             changed plans across the catalog and turned curve_truck (ethical and
-            selfish) from goal into no_progress, a stall not yet explained; the world
-            still reports every shoulder entry (``RuleViolations``).
+            selfish) from goal into no_progress (an ego stopped on the shoulder had no
+            move that kept the rule; fixed, ``breaks_lane_rules``; the catalog with it
+            on is not compared yet); the world still reports every shoulder entry
+            (``RuleViolations``).
         pass_lookahead: how far ahead of the ego's front a slow obstacle releases a
             no-overtaking zone [m].
         marking_margin: the planner keeps this far inside the centre line and the

@@ -391,7 +391,9 @@ def breaks_lane_rules(
     further across the centre line than the ego's does now (t = 0): an ego already
     across (an overtaking begun before the zone) may return, never go further. It
     breaks the shoulder rule if its footprint reaches further beyond an outer lane edge
-    than now, at any step.
+    than now, at any step; an ego already beyond the edge breaks it only at steps at which
+    its centre is also further out than now (turning back into the lane, or with a
+    curve, swings a corner further out).
 
     Args:
         candidates: the cycle's candidates.
@@ -410,8 +412,18 @@ def breaks_lane_rules(
         further = across[:, 1:] > across[:, :1] + _GROWTH_M
         broken |= np.any(in_zone[:, 1:] & further, axis=1)
     if rules.edges is not None:
-        beyond = np.maximum(rules.edges[0] - right, 0.0) + np.maximum(left - rules.edges[1], 0.0)
-        broken |= np.any(beyond[:, 1:] > beyond[:, :1] + _GROWTH_M, axis=1)
+        d = candidates.d
+        for past, outward in (
+            (np.maximum(rules.edges[0] - right, 0.0), d[:, 1:] < d[:, :1] - _GROWTH_M),
+            (np.maximum(left - rules.edges[1], 0.0), d[:, 1:] > d[:, :1] + _GROWTH_M),
+        ):
+            further = past[:, 1:] > past[:, :1] + _GROWTH_M
+            # An ego already beyond the edge swings a corner further out whenever it
+            # turns (back into the lane, or with a curve); only moving further out
+            # itself (its centre) counts then, else no plan but standing still keeps
+            # the rule and it stands on the shoulder for good.
+            on_it = past[:, :1] > 0.0
+            broken |= np.any(further & (~on_it | outward), axis=1)
     return broken
 
 

@@ -323,6 +323,26 @@ def test_driving_onto_a_shoulder_breaks_the_rule_unless_returning():
     assert breaks_lane_rules(_poses(s, d), path, shape, rules).tolist() == [True, False, False, True, False]
 
 
+def test_an_ego_on_the_shoulder_may_turn_back_into_the_lane():
+    # curve_truck with the rule on (ethical and selfish stood still for good): an ego
+    # standing 0.18 m beyond the right edge (d = -0.93, right side -1.93) whose every
+    # moving plan swings a corner further out. Turned 0.1 rad left to return, d = -0.93:
+    # its right rear corner reaches -0.93 - 2 sin 0.1 - cos 0.1 = -2.1297 m, 0.2 m further
+    # out, with the centre no further out: allowed. Moving the centre right: broken.
+    path = _marked_road().reference_path
+    shape = Shape(4.0, 2.0)
+    rules = LaneRules(None, np.zeros((0, 2)), (-1.75, 5.25))
+    right, _ = lateral_extent(_poses([[10.0]], [[-0.93]], 0.1), path, shape)
+    assert right[0, 0] == pytest.approx(-0.93 - 2.0 * np.sin(0.1) - np.cos(0.1), abs=1e-9)
+    s = [[10.0, 12.0, 14.0]] * 3
+    d = [[-0.93, -0.93, -0.6], [-0.93, -0.95, -1.0], [-0.93, -0.93, -0.93]]
+    yaw = [[0.0, 0.1, 0.1], [0.0, 0.0, 0.0], [0.0, -0.05, -0.05]]
+    assert breaks_lane_rules(_poses(s, d, yaw), path, shape, rules).tolist() == [False, True, False]
+    # From inside the lane the same swing of a corner over the edge still breaks it.
+    inside = _poses([[10.0, 12.0]], [[-0.7, -0.7]], [[0.0, -0.1]])
+    assert breaks_lane_rules(inside, path, shape, rules).tolist() == [True]
+
+
 def _slow_car(x, v):
     return RoadUser(1, "truck", KinematicState(x=x, y=0.0, yaw=0.0, v=v), Shape(6.0, 2.5), mass=7000.0)
 
