@@ -9,6 +9,7 @@ time (Eq. 3), maximin's set (p > epsilon) or the responsibility's onset stays as
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,11 +88,59 @@ class RiskDetail:
 #: Extra inward margin [m] of the eroded drivable area, above the sagitta of shapely's
 #: arc approximation (r (1 - cos(pi / 32)) < 0.5 % of r at quad_segs = 8) and rounding.
 _ERODE_MARGIN = 0.05
-_ERODED: dict[tuple[int, float], tuple[object, object]] = {}
+_ERODED: dict[tuple[int, float], tuple[object, object, _InsideGrid | None]] = {}
+#: Cells of an ``_InsideGrid`` (about: rounded up per axis), and their smallest edge [m].
+_GRID_CELLS = 40_000
+_GRID_MIN_CELL = 0.5
+#: Slack [m] of a grid cell's box beyond the cell: more than the rounding of the cell index.
+_GRID_SLACK = 1e-6
 
 
-def _eroded_area(area: shapely.Geometry, radius: float) -> shapely.Geometry:
-    """``area`` shrunk by ``radius`` [m] plus a margin, prepared, cached per area object."""
+@dataclass(frozen=True, slots=True, eq=False)
+class _InsideGrid:
+    """Square cells over a polygon's bounds, marked where the whole cell lies in its interior.
+
+    A fast path for ``shapely.contains_xy``: a point in a marked cell is contained; the
+    others need the exact test. A cell is marked if its box, grown by _GRID_SLACK, lies
+    in the polygon's interior (``contains_properly``: no boundary contact), so rounding
+    of a point's cell index cannot put a point outside the polygon in a marked cell.
+
+    Attributes:
+        x0, y0: the grid's lower-left corner [m]. cell: cell edge [m].
+        inside: marked cells, shape (ny, nx).
+    """
+
+    x0: float
+    y0: float
+    cell: float
+    inside: np.ndarray
+
+    @classmethod
+    def of(cls, polygon: shapely.Geometry) -> _InsideGrid | None:
+        """The grid of a prepared polygon (None if it is empty)."""
+        if polygon.is_empty:
+            return None
+        x0, y0, x1, y1 = polygon.bounds
+        cell = max(_GRID_MIN_CELL, math.sqrt((x1 - x0) * (y1 - y0) / _GRID_CELLS))
+        nx, ny = max(1, math.ceil((x1 - x0) / cell)), max(1, math.ceil((y1 - y0) / cell))
+        ix, iy = np.meshgrid(np.arange(nx), np.arange(ny))
+        left, bottom = x0 + ix * cell - _GRID_SLACK, y0 + iy * cell - _GRID_SLACK
+        boxes = shapely.box(left, bottom, left + cell + 2 * _GRID_SLACK, bottom + cell + 2 * _GRID_SLACK)
+        return cls(x0, y0, cell, shapely.contains_properly(polygon, boxes))
+
+    def contains(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """True where the point lies in a marked cell (so in the polygon), shape of ``x``."""
+        ix = np.floor((x - self.x0) / self.cell)
+        iy = np.floor((y - self.y0) / self.cell)
+        ny, nx = self.inside.shape
+        within = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+        result = np.zeros(x.shape, dtype=bool)
+        result[within] = self.inside[iy[within].astype(np.int64), ix[within].astype(np.int64)]
+        return result
+
+
+def _eroded_area(area: shapely.Geometry, radius: float) -> tuple[shapely.Geometry, _InsideGrid | None]:
+    """``area`` shrunk by ``radius`` [m] plus a margin, prepared, and its grid; cached per area object."""
     key = (id(area), radius)
     cached = _ERODED.get(key)
     if cached is None or cached[0] is not area:
@@ -100,8 +149,21 @@ def _eroded_area(area: shapely.Geometry, radius: float) -> shapely.Geometry:
         inner = area.buffer(-(radius * 1.01 + _ERODE_MARGIN))
         shapely.prepare(inner)
         # The entry keeps ``area`` alive, so its id cannot be reused while cached.
-        cached = _ERODED[key] = (area, inner)
-    return cached[1]
+        cached = _ERODED[key] = (area, inner, _InsideGrid.of(inner))
+    return cached[1], cached[2]
+
+
+def _contains(
+    polygon: shapely.Geometry, grid: _InsideGrid | None, x: np.ndarray, y: np.ndarray
+) -> np.ndarray:
+    """``shapely.contains_xy(polygon, x, y)``; the exact test only for points outside marked cells."""
+    if grid is None:
+        return shapely.contains_xy(polygon, x, y)
+    result = grid.contains(x, y)
+    rest = np.flatnonzero(~result)
+    if rest.size:
+        result.ravel()[rest] = shapely.contains_xy(polygon, x.ravel()[rest], y.ravel()[rest])
+    return result
 
 
 def outside_drivable_area(
@@ -133,7 +195,7 @@ def outside_drivable_area(
     x, y, yaw = candidates.x, candidates.y, candidates.yaw
     if rows is not None:
         x, y, yaw = x[rows], y[rows], yaw[rows]
-    deep = shapely.contains_xy(_eroded_area(area, half_diagonal), x, y)
+    deep = _contains(*_eroded_area(area, half_diagonal), x, y)
     outside = np.zeros(x.shape, dtype=bool)
     edge = np.flatnonzero(~deep)
     if edge.size:

@@ -399,3 +399,50 @@ def test_planner_with_a_mixture_prediction_decides_as_evaluating_every_candidate
     assert decision.chosen_index == index
     for name, value in decision.costs.items():
         assert value == getattr(costs, name)[index], name
+
+
+@pytest.mark.parametrize("case", ["curved_road", "debris", "large_map"])
+def test_inside_grid_fast_path_equals_shapely_contains(case):
+    """The road-edge test's grid of interior cells gives shapely's answer at every point.
+
+    Points: random ones over the bounds and beyond, the polygons' own vertices (on the
+    boundary: not contained), points on the grid's cell edges and corners, and points
+    just inside and outside those edges.
+    """
+    import shapely
+
+    from ethical_planner.risk import _contains, _InsideGrid
+
+    env = RoadEnvironment.along_path(
+        [[0, 0], [20, 2], [40, 10], [55, 25], [60, 45]], lanes_left=1, lanes_right=1, margin=0.3
+    )
+    polygon = env.drivable_area
+    if case == "debris":
+        holes = shapely.union_all([shapely.box(10, -1, 12, 1), shapely.Point(45, 15).buffer(0.8)])
+        polygon = polygon.difference(holes)
+    elif case == "large_map":
+        # A long thin polygon over a large box: cells coarser than the minimum.
+        polygon = shapely.union_all([polygon, shapely.box(0, 300, 900, 304), shapely.box(896, 0, 900, 304)])
+    polygon = polygon.buffer(-0.7)
+    shapely.prepare(polygon)
+    grid = _InsideGrid.of(polygon)
+    assert grid is not None and grid.inside.any() and not grid.inside.all()
+    if case == "large_map":
+        assert grid.cell > 0.5 and grid.inside.size <= 41_000  # 40,000 cells, rounded up per axis
+    rng = np.random.default_rng(7)
+    x0, y0, x1, y1 = polygon.bounds
+    x = rng.uniform(x0 - 5, x1 + 5, 200_000)
+    y = rng.uniform(y0 - 5, y1 + 5, 200_000)
+    ny, nx = grid.inside.shape
+    ex = grid.x0 + grid.cell * rng.integers(0, nx + 1, 50_000)
+    ey = grid.y0 + grid.cell * rng.integers(0, ny + 1, 50_000)
+    vx, vy = shapely.get_coordinates(polygon).T
+    tiny = 1e-9
+    x = np.concatenate([x, ex, ex + tiny, ex - tiny, rng.uniform(x0, x1, 50_000), vx])
+    y = np.concatenate([y, ey, ey - tiny, ey + tiny, ey, vy])
+    expected = shapely.contains_xy(polygon, x, y)
+    np.testing.assert_array_equal(_contains(polygon, grid, x, y), expected)
+    # The fast path decides most points inside (on a large map with coarse cells, fewer).
+    share = grid.contains(x, y).sum() / expected.sum()
+    assert share > (0.05 if case == "large_map" else 0.5)
+    assert not shapely.contains_xy(polygon, vx, vy).any()
