@@ -122,6 +122,13 @@ def test_cause_4_overtake_cyclist_waits_for_oncoming_traffic_then_passes_with_cl
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="since the road edge is a wall to the planner (ethical_planner.boundary) the 4.4 s "
+    "evasion brakes instead of planning through the right wall; the ego then crawls behind the "
+    "walker to the time limit, Eq. 5 preferring the crawl to valid passes (README, 'The road "
+    "edge is a wall')",
+)
 def test_cause_4_curve_truck_reaches_the_goal_passing_the_walker_with_clearance():
     from mujoco_world.loop.runner import run_scenario
 
