@@ -432,6 +432,13 @@ class CostWeights:
       overtake is not a permanent path deviation.
     - other_lane = 10: per lane between the lane the ego is in and the route's lane
       (time mean): keep to the own lane and return to it after an overtake.
+    - oncoming_lane = 2: per lane across the centre line, in the oncoming traffic's
+      lanes (time mean, ``cost.oncoming_lanes``), on top of other_lane: the wrong side
+      of the road costs 20 % more than a lane of the ego's own direction, so of two
+      ways past an obstacle the ego prefers its own direction's lanes. Not more: at 10
+      (twice a lane) an overtake of a 5 m/s cyclist cost about as much as staying
+      behind it, and the catalog's overtakes (overtake_cyclist, curve_truck) ended in
+      timeouts (measured, 63-run demo).
 
     Attributes:
         risk: w_risk of Eq. 5.
@@ -444,6 +451,7 @@ class CostWeights:
         speed: weight of the mean |v - v_desired| [per m/s].
         path_distance: weight of the mean lateral offset from the path reference [per m].
         other_lane: weight per lane between the end lane and the route's lane.
+        oncoming_lane: weight per lane across the centre line (oncoming traffic's lanes).
         path_reference: what the path term measures against (``PathReference``).
     """
 
@@ -460,6 +468,7 @@ class CostWeights:
     speed: float = 2.0
     path_distance: float = 1.0
     other_lane: float = 10.0
+    oncoming_lane: float = 2.0
     path_reference: PathReference = PathReference.LANES
 
     def __post_init__(self) -> None:
@@ -708,6 +717,7 @@ PRESETS.register(
             "speed": 1.0,
             "path_distance": 10.0,
             "other_lane": 0.0,
+            "oncoming_lane": 0.0,
             "path_reference": "route",
         },
     },

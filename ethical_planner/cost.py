@@ -154,16 +154,60 @@ def path_deviation(
     n = d.shape[0]
     if reference is PathReference.ROUTE or not lane_offsets:
         return np.abs(d).mean(axis=1), np.zeros(n)
+    centre, route_centre = _nearest_lane_centre(d, lane_offsets, lane_width)
+    lanes_away = np.abs(centre - route_centre) / lane_width
+    return np.abs(d - centre).mean(axis=1), lanes_away.mean(axis=1)
+
+
+def _nearest_lane_centre(
+    d: np.ndarray, lane_offsets: tuple[float, ...], lane_width: float
+) -> tuple[np.ndarray, float]:
+    """Centre offset [m] of the lane each (candidate, step) is in, (n, n_t), and the route lane's.
+
+    The road's lane centres, continued at ``lane_width`` for ``_VIRTUAL_LANES`` beyond
+    the outer lanes (a shoulder, a parking strip count as further lanes); the route's
+    lane is the centre nearest the reference path.
+    """
     road = np.sort(np.asarray(lane_offsets, dtype=float))
-    route_centre = road[np.abs(road).argmin()]
+    route_centre = float(road[np.abs(road).argmin()])
     # Beyond the outer lanes (shoulder, parking strip, kerb) the lane grid goes on: being
     # there counts as being in another lane, not as a small offset from the outer one.
     beyond = lane_width * np.arange(1, _VIRTUAL_LANES + 1)
     centres = np.concatenate([road[0] - beyond[::-1], road, road[-1] + beyond])
     # Nearest lane centre of every (candidate, step): between midpoints of sorted centres.
     lane = np.searchsorted(0.5 * (centres[1:] + centres[:-1]), d)
-    lanes_away = np.abs(centres[lane] - route_centre) / lane_width
-    return np.abs(d - centres[lane]).mean(axis=1), lanes_away.mean(axis=1)
+    return centres[lane], route_centre
+
+
+def oncoming_lanes(
+    d: np.ndarray,
+    lane_offsets: tuple[float, ...],
+    lane_width: float,
+    centre_line: float | None,
+    reference: PathReference,
+) -> np.ndarray:
+    """Mean number of lanes across the centre line, of oncoming traffic, per candidate, (n,).
+
+    The lane each (candidate, step) is in (as ``path_deviation``), counted from the
+    centre line: 0 in a lane of the ego's direction (or on its shoulder), 1 in the first
+    oncoming lane, 2 in the next. It prices driving on the wrong side beyond what any
+    other lane costs (``CostWeights.oncoming_lane``). Zero without a centre line (one-way
+    roads, roads without markings) and with the ``ROUTE`` reference.
+
+    Args:
+        d: lateral offsets from the reference path [m], shape (n, n_t).
+        lane_offsets: lane centres' offsets from the reference path [m].
+        lane_width: [m].
+        centre_line: offset of the line between the ego's and the oncoming lanes
+            (``RoadEnvironment.centre_line``) [m], or None.
+        reference: what the path term measures against.
+    """
+    n = d.shape[0]
+    if centre_line is None or reference is PathReference.ROUTE or not lane_offsets:
+        return np.zeros(n)
+    centre, _ = _nearest_lane_centre(d, lane_offsets, lane_width)
+    across = np.where(centre > centre_line, np.floor((centre - centre_line) / lane_width) + 1.0, 0.0)
+    return across.mean(axis=1)
 
 
 def comfort_and_mobility(
@@ -173,6 +217,7 @@ def comfort_and_mobility(
     lateral_deviation: np.ndarray,
     lanes_away: np.ndarray,
     weights: CostWeights,
+    lanes_oncoming: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The risk-free parts of Eq. 5: comfort and mobility costs, shape (n,) each.
 
@@ -184,6 +229,8 @@ def comfort_and_mobility(
         + weights.path_distance * lateral_deviation
         + weights.other_lane * lanes_away
     )
+    if lanes_oncoming is not None:
+        mobility = mobility + weights.oncoming_lane * lanes_oncoming
     return comfort, mobility
 
 
@@ -212,6 +259,7 @@ def total_cost(
     lanes_away: np.ndarray,
     levels: np.ndarray,
     weights: CostWeights,
+    lanes_oncoming: np.ndarray | None = None,
 ) -> CostBreakdown:
     """Cost of every candidate.
 
@@ -230,6 +278,8 @@ def total_cost(
         lanes_away: (n,) mean lanes between the current lane and the route's lane.
         levels: (n,) validity levels.
         weights: the weights.
+        lanes_oncoming: (n,) mean lanes across the centre line (``oncoming_lanes``);
+            None: 0.
     """
     j_b = bayes(risks, present)
     j_e = equality(risks, present)
@@ -243,7 +293,7 @@ def total_cost(
         + weights.ego_risk * ego_combined
     )
     comfort, mobility = comfort_and_mobility(
-        jerk_lon, jerk_lat, speed_deviation, lateral_deviation, lanes_away, weights
+        jerk_lon, jerk_lat, speed_deviation, lateral_deviation, lanes_away, weights, lanes_oncoming
     )
     valid = levels == Validity.VALID
     total = np.where(valid, eq5_cost(j_risk, comfort, mobility, weights), j_risk)

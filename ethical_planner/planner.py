@@ -22,6 +22,7 @@ from ethical_planner.cost import (
     CostBreakdown,
     comfort_and_mobility,
     eq5_cost,
+    oncoming_lanes,
     path_deviation,
     responsibility,
     risk_set,
@@ -610,7 +611,9 @@ class Planner:
         """
         weights = self.config.weights
         rows = assessed
-        comfort, mobility = comfort_and_mobility(*self._risk_free_terms(candidates, rows), weights)
+        comfort, mobility = comfort_and_mobility(
+            *self._risk_free_terms(candidates, rows), weights, self._oncoming(candidates, rows)
+        )
         bound = eq5_cost(np.zeros(rows.size), comfort, mobility, weights)
         order = np.argsort(bound, kind="stable")
         first = np.flatnonzero(candidates.kind[rows] == CandidateKind.CONTINUATION)
@@ -700,6 +703,7 @@ class Planner:
             *self._risk_free_terms(candidates, risk.rows),
             levels,
             config.weights,
+            self._oncoming(candidates, risk.rows),
         )
 
     def _risk_free_terms(self, candidates: Candidates, rows: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -718,6 +722,17 @@ class Planner:
                 self.environment.lane_width,
                 self.config.weights.path_reference,
             ),
+        )
+
+    def _oncoming(self, candidates: Candidates, rows: np.ndarray) -> np.ndarray:
+        """Mean lanes across the centre line of candidates ``rows`` (``cost.oncoming_lanes``), (m,)."""
+        env = self.environment
+        return oncoming_lanes(
+            candidates.d[rows],
+            env.lane_offsets,
+            env.lane_width,
+            env.centre_line,
+            self.config.weights.path_reference,
         )
 
     def plan(

@@ -218,3 +218,42 @@ def test_mobility_by_hand_lane_centres_and_the_lane_preference():
         w,
     )
     np.testing.assert_allclose(costs.mobility, [2.0 + 0.5, 10.0, 0.75 + 5.0])
+
+
+def test_oncoming_lanes_count_the_lanes_across_the_centre_line():
+    """The wrong side of the road: lanes across the centre line, by hand.
+
+    Two lanes (0 the ego's, 3.5 the oncoming; centre line 1.75): at 3.3 m throughout one
+    oncoming lane, half the time there (0, 0, 3.5, 3.5) 0.5; at 7.0 m (beyond the road,
+    the grid goes on) two. Four lanes, two per direction (centre line 5.25): the own
+    direction's left lane (3.5) is none, the first oncoming (7.0) one, the next (10.5) two.
+    """
+    from ethical_planner.config import PathReference
+    from ethical_planner.cost import comfort_and_mobility, oncoming_lanes, path_deviation
+
+    lanes = PathReference.LANES
+    d = np.array([[0.3] * 4, [3.3] * 4, [0.0, 0.0, 3.5, 3.5], [7.0] * 4, [-3.5] * 4])
+    np.testing.assert_allclose(oncoming_lanes(d, (0.0, 3.5), 3.5, 1.75, lanes), [0.0, 1.0, 0.5, 2.0, 0.0])
+    four = (0.0, 3.5, 7.0, 10.5)
+    d4 = np.array([[3.5] * 4, [7.0] * 4, [10.5] * 4])
+    np.testing.assert_allclose(oncoming_lanes(d4, four, 3.5, 5.25, lanes), [0.0, 1.0, 2.0])
+    # No centre line (one way), or the route as the reference: nothing counted.
+    np.testing.assert_allclose(oncoming_lanes(d, (0.0, 3.5), 3.5, None, lanes), 0.0)
+    np.testing.assert_allclose(oncoming_lanes(d, (0.0, 3.5), 3.5, 1.75, PathReference.ROUTE), 0.0)
+    # Mobility: a lane of oncoming traffic costs other_lane + oncoming_lane (10 + 10), the
+    # own direction's left lane of a one-way road other_lane alone (10).
+    w = CostWeights(
+        speed=0.0, path_distance=0.0, other_lane=10.0, oncoming_lane=10.0, jerk_lon=0.0, jerk_lat=0.0
+    )
+    one_way = np.array([[3.5] * 4])
+    _, away = path_deviation(one_way, (0.0, 3.5), 3.5, lanes)
+    _, mobility = comfort_and_mobility(
+        np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1), away, w,
+        oncoming_lanes(one_way, (0.0, 3.5), 3.5, None, lanes),
+    )  # fmt: skip
+    np.testing.assert_allclose(mobility, [10.0])
+    _, mobility = comfort_and_mobility(
+        np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1), away, w,
+        oncoming_lanes(one_way, (0.0, 3.5), 3.5, 1.75, lanes),
+    )  # fmt: skip
+    np.testing.assert_allclose(mobility, [20.0])

@@ -476,3 +476,27 @@ def test_the_readme_predictor_example_runs_and_its_registration_works(monkeypatc
 def test_old_correction_option_is_rejected_by_name():
     with pytest.raises(ValueError, match="unknown key 'risk.delta_v_correction'"):
         preset("ethical").with_overrides({"risk": {"delta_v_correction": "calibration.json"}})
+
+
+def test_the_oncoming_lane_costs_more_than_a_lane_of_the_own_direction():
+    """A plan in the oncoming lane pays ``weights.oncoming_lane`` per lane across the centre line.
+
+    The same two-lane road once as a one-way road (no centre line: the left lane is one
+    of the ego's own direction) and once as a two-way road (centre line between the
+    lanes: the left lane is the oncoming traffic's). No one else on the road, the ego at
+    10 m/s in the left lane: both choose the same return to the right lane; on the
+    two-way road its mobility cost is higher by 2 x the fraction of steps the ego's
+    centre spends across the centre line (d > 1.75 m: in the oncoming lane's half).
+    """
+    one_way = RoadEnvironment.along_path([[-30, 0], [300, 0]], lanes_left=1)
+    two_way = dataclasses.replace(one_way, centre_line=1.75)
+    ego = KinematicState(0.0, 3.5, 0.0, 10.0)
+    config = preset("ethical").with_overrides({"commitment": {"enabled": False}})
+    one, two = (Planner(config, env).plan(ego, []) for env in (one_way, two_way))
+    np.testing.assert_allclose(two.trajectory.y, one.trajectory.y)  # the same plan
+    y = two.trajectory.y
+    assert y[0] == pytest.approx(3.5) and y[-1] < 1.75  # back on its side
+    across = float(np.mean(y > 1.75))
+    assert 0.0 < across < 1.0
+    extra = two.costs["mobility"] - one.costs["mobility"]
+    assert extra == pytest.approx(2.0 * across, abs=1e-9)  # weights.oncoming_lane = 2
