@@ -432,13 +432,14 @@ class CostWeights:
       overtake is not a permanent path deviation.
     - other_lane = 10: per lane between the lane the ego is in and the route's lane
       (time mean): keep to the own lane and return to it after an overtake.
-    - oncoming_lane = 2: per lane across the centre line, in the oncoming traffic's
-      lanes (time mean, ``cost.oncoming_lanes``), on top of other_lane: the wrong side
-      of the road costs 20 % more than a lane of the ego's own direction, so of two
-      ways past an obstacle the ego prefers its own direction's lanes. Not more: at 10
-      (twice a lane) an overtake of a 5 m/s cyclist cost about as much as staying
-      behind it, and the catalog's overtakes (overtake_cyclist, curve_truck) ended in
-      timeouts (measured, 63-run demo).
+    - oncoming_lane = 0: per lane across the centre line, in the oncoming traffic's
+      lanes (time mean, ``cost.oncoming_lanes``), on top of other_lane; off by default.
+      SPEC's mobility term knows no lanes, and pricing the wrong side more than a lane of
+      the ego's own direction cost the catalog outcomes (measured against main 9ad1e39,
+      seed 0): at 10, overtake_cyclist ethical and selfish timed out behind the cyclist;
+      at 2, curve_truck selfish (goal -> timeout) and turning_truck_cyclist standard
+      (goal -> no_progress) stayed behind the truck, while dense_urban standard reached
+      its goal 9.5 s sooner. Set it together with ``speed`` (what staying behind costs).
 
     Attributes:
         risk: w_risk of Eq. 5.
@@ -468,7 +469,7 @@ class CostWeights:
     speed: float = 2.0
     path_distance: float = 1.0
     other_lane: float = 10.0
-    oncoming_lane: float = 2.0
+    oncoming_lane: float = 0.0
     path_reference: PathReference = PathReference.LANES
 
     def __post_init__(self) -> None:

@@ -693,6 +693,7 @@ class Planner:
             [risk.maximin_harm_obs, risk.maximin_harm_ego, risk.boundary_risk[:, None]], axis=1
         )
         counted = np.concatenate([np.ones((m, 2 * k), dtype=bool), leaves[:, None]], axis=1)
+        oncoming = self._oncoming(candidates, risk.rows)
         return total_cost(
             risks,
             present,
@@ -703,7 +704,7 @@ class Planner:
             *self._risk_free_terms(candidates, risk.rows),
             levels,
             config.weights,
-            self._oncoming(candidates, risk.rows),
+            **({} if oncoming is None else {"lanes_oncoming": oncoming}),
         )
 
     def _risk_free_terms(self, candidates: Candidates, rows: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -724,16 +725,16 @@ class Planner:
             ),
         )
 
-    def _oncoming(self, candidates: Candidates, rows: np.ndarray) -> np.ndarray:
-        """Mean lanes across the centre line of candidates ``rows`` (``cost.oncoming_lanes``), (m,)."""
-        env = self.environment
-        return oncoming_lanes(
-            candidates.d[rows],
-            env.lane_offsets,
-            env.lane_width,
-            env.centre_line,
-            self.config.weights.path_reference,
-        )
+    def _oncoming(self, candidates: Candidates, rows: np.ndarray) -> np.ndarray | None:
+        """Mean lanes across the centre line of candidates ``rows`` (``cost.oncoming_lanes``), (m,).
+
+        None when ``weights.oncoming_lane`` is 0 (the default): the term is left out.
+        """
+        weights, env = self.config.weights, self.environment
+        if not weights.oncoming_lane:
+            return None
+        d = candidates.d[rows]
+        return oncoming_lanes(d, env.lane_offsets, env.lane_width, env.centre_line, weights.path_reference)
 
     def plan(
         self,

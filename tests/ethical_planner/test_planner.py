@@ -479,7 +479,7 @@ def test_old_correction_option_is_rejected_by_name():
 
 
 def test_the_oncoming_lane_costs_more_than_a_lane_of_the_own_direction():
-    """A plan in the oncoming lane pays ``weights.oncoming_lane`` per lane across the centre line.
+    """A plan in the oncoming lane pays ``weights.oncoming_lane`` (here 2) per lane across the centre line.
 
     The same two-lane road once as a one-way road (no centre line: the left lane is one
     of the ego's own direction) and once as a two-way road (centre line between the
@@ -491,7 +491,9 @@ def test_the_oncoming_lane_costs_more_than_a_lane_of_the_own_direction():
     one_way = RoadEnvironment.along_path([[-30, 0], [300, 0]], lanes_left=1)
     two_way = dataclasses.replace(one_way, centre_line=1.75)
     ego = KinematicState(0.0, 3.5, 0.0, 10.0)
-    config = preset("ethical").with_overrides({"commitment": {"enabled": False}})
+    config = preset("ethical").with_overrides(
+        {"commitment": {"enabled": False}, "weights": {"oncoming_lane": 2.0}}
+    )
     one, two = (Planner(config, env).plan(ego, []) for env in (one_way, two_way))
     np.testing.assert_allclose(two.trajectory.y, one.trajectory.y)  # the same plan
     y = two.trajectory.y
@@ -500,3 +502,7 @@ def test_the_oncoming_lane_costs_more_than_a_lane_of_the_own_direction():
     assert 0.0 < across < 1.0
     extra = two.costs["mobility"] - one.costs["mobility"]
     assert extra == pytest.approx(2.0 * across, abs=1e-9)  # weights.oncoming_lane = 2
+    # Off by default (SPEC's mobility term knows no lanes): the same cost on both roads.
+    default = preset("ethical").with_overrides({"commitment": {"enabled": False}})
+    one, two = (Planner(default, env).plan(ego, []) for env in (one_way, two_way))
+    assert two.costs["mobility"] == one.costs["mobility"]
