@@ -16,7 +16,8 @@ physics). A candidate's positions beyond the edge are not where the car would be
 - **Impact speed** (``edge_impact_speed``): the boundary harm is the harm of a plastic
   impact on a rigid wall at the plan's speed *into* the edge, v max(0, -(heading .
   normal)), at the first step at which the plan leaves the road (a head-on plan: its
-  full speed, as the paper prices every exit; a plan grazing the wall: almost nothing).
+  full speed, as the paper prices every exit; a plan grazing the wall: the harm
+  curve's floor at zero speed, 0.010 with the default coefficients).
 
 Both come from one push-back: the deepest footprint corner beyond the edge is moved to
 its nearest point on the edge, and that vector is the centre's shift (exact for a
@@ -187,7 +188,7 @@ def physical_view(
     nx, ny, pushed = _inward_normal(dx, dy)
     along_normal = np.cos(yaw) * nx + np.sin(yaw) * ny
     into = pushed & (v * along_normal < 0.0)
-    kept = np.where(into, np.abs(v) * np.sqrt(np.clip(1.0 - along_normal**2, 0.0, 1.0)), v)
+    kept = np.where(into, v * np.sqrt(np.clip(1.0 - along_normal**2, 0.0, 1.0)), v)
     new_x, new_y, new_v = candidates.x.copy(), candidates.y.copy(), candidates.v.copy()
     new_x[row, step] = x + dx
     new_y[row, step] = y + dy

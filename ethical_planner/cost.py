@@ -96,6 +96,9 @@ def equality(risks: np.ndarray, present: np.ndarray | None = None) -> np.ndarray
     rank = np.arange(width)[None, :]
     coefficients = np.where(rank < m, 2.0 * rank - m + 1.0, 0.0)
     total = (np.where(rank < m, ordered, 0.0) * coefficients).sum(axis=1)
+    # Sum of |differences| >= 0; the rank form can round to about -1e-20 for nearly equal
+    # risks, and the planner's branch and bound relies on every risk term being >= 0.
+    total = np.maximum(total, 0.0)
     pairs = (m[:, 0] * (m[:, 0] - 1)) / 2.0
     return np.where(pairs > 0, total / np.maximum(pairs, 1.0), 0.0)
 

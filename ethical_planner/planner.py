@@ -147,7 +147,7 @@ class Decision:
         level: validity level of the chosen plan.
         level_counts: candidates per validity level; key ``UNASSESSED`` (-1): candidates
             whose risk was not evaluated because their Eq. 5 cost at zero risk is above
-            the chosen plan's (valid or above R_max: unknown, never counted as either).
+            the chosen plan's (valid, above R_max or breaks a traffic rule: unknown, never counted as any).
         invalid_counts: physically invalid candidates per broken limit (a candidate
             may break several).
         terminal_unsafe: candidates within the physical limits that end in oncoming
@@ -337,7 +337,7 @@ class _Evaluation:
         r_obs, r_ego: their responsibilities, shape (m, k); None if the responsibility
             weight is 0 (then only the chosen plan's are computed, for the record).
         levels: validity level of every candidate, shape (n,); ``UNASSESSED`` for a
-            candidate the branch and bound left out (valid or above R_max: unknown).
+            candidate the branch and bound left out (valid, above R_max or breaks a traffic rule: unknown).
         invalid: physically invalid candidates per broken limit, shape (n,) each.
         costs: cost terms of every candidate, shape (n,) each, NaN where not assessed.
         risk_obs: R_k of every candidate, shape (n, k), 0 where not assessed.
@@ -594,7 +594,10 @@ class Planner:
         (ties are evaluated, so the tie-break by comfort plus mobility is that of full
         evaluation), and so does its Eq. 5 cost if R_max refuses it: the refused count
         and ``Decision.best_by_level[VALID]`` are exact. The continuation of the
-        previous plan is always evaluated (the commitment compares its cost).
+        previous plan is always evaluated (the commitment compares its cost); if it is
+        valid, the search also goes on up to its cost, because the commitment may keep it
+        at a cost above the cheapest and R_max's refusals are counted against the plan
+        chosen.
 
         If an evaluated candidate's total ever falls below its bound (a cost term that
         can be negative), the rest is evaluated too: the result stays that of full
@@ -621,6 +624,7 @@ class Planner:
         done = np.zeros(rows.size, dtype=bool)
         parts: list[_Assessed] = []
         incumbent = math.inf
+        kept_cost = -math.inf
         take = np.union1d(first, order[:batch])
         while take.size:
             part = evaluate(rows[take])
@@ -633,9 +637,16 @@ class Planner:
             valid = part.levels == Validity.VALID
             if valid.any():
                 incumbent = min(incumbent, float(costs.total[valid].min()))
+            # A valid continuation may be kept at a cost above the cheapest (commitment),
+            # and R_max's refusals are counted against the plan chosen: every candidate
+            # whose Eq. 5 cost could lie below the kept plan's must be evaluated as well.
+            continued = valid & (candidates.kind[part.risk.rows] == CandidateKind.CONTINUATION)
+            if continued.any():
+                kept_cost = max(kept_cost, float(costs.total[continued].max()))
             batch *= 2
             waiting = order[~done[order]]
-            take = np.sort(waiting[bound[waiting] <= incumbent][:batch])
+            threshold = max(incumbent, kept_cost) if math.isfinite(incumbent) else incumbent
+            take = np.sort(waiting[bound[waiting] <= threshold][:batch])
         return _Assessed.concatenate(parts)
 
     def _breaks_rules(

@@ -36,7 +36,8 @@ class Validity(IntEnum):
 
 #: Not a validity level: the mark of a candidate whose risk the planner did not evaluate,
 #: because its Eq. 5 cost cannot be below the chosen plan's even at zero risk
-#: (``Planner._branch_and_bound``). Its level is valid or above R_max; which is unknown.
+#: (``Planner._branch_and_bound``). Its level is valid, above R_max or breaks a traffic
+#: rule; which is unknown.
 UNASSESSED = -1
 
 #: Reasons of validity level 0, in the order of ``physically_invalid``.

@@ -32,7 +32,7 @@ Entities (all in the world frame, z up, road plane z = 0):
     ``above_max_risk``, ``breaks_traffic_rule``: candidates per validity level (they
     add up to ``total``); ``unassessed``: candidates whose risk the planner did not
     evaluate because their Eq. 5 cost at zero risk is already above the chosen
-    plan's (valid or above R_max, unknown which; drawn in a pale blue-grey, never
+    plan's (valid, above R_max or rule-breaking, unknown which; drawn in a pale blue-grey, never
     counted as either level);
     ``series/rejected/limit/<limit>``: candidates breaking each physical limit
     (``speed``, ``acceleration``, ``curvature``, ``lateral_acceleration``,

@@ -22,7 +22,7 @@ from ethical_planner.road_users import RoadUserType as T
 from ethical_planner.situations import overtaking_cyclist
 from ethical_planner.validity import UNASSESSED, Validity
 
-PRESETS = ("ethical", "ethical_responsible", "selfish", "standard")
+PRESETS = ("ethical", "ethical_responsible", "selfish", "standard", "reference")
 
 
 def _street(seed: int):
@@ -124,6 +124,38 @@ def test_r_max_refusals_are_counted_and_the_incumbent_is_a_final_valid_plan(monk
     assert "not risk-assessed" in decision.summary()
 
 
+def test_refusals_are_counted_against_a_kept_plan_that_costs_more_than_the_cheapest(monkeypatch):
+    """The commitment may keep the previous plan at a cost above the cheapest valid one; R_max's
+    refusals are counted against the plan chosen, so candidates whose Eq. 5 cost lies between
+    the two must be evaluated too (found by review: 30 refusals counted instead of 34)."""
+    import dataclasses
+
+    situation = overtaking_cyclist()
+    moved = tuple(
+        dataclasses.replace(u, state=dataclasses.replace(u.state, x=u.state.x + 3.0))
+        for u in situation.road_users
+    )
+    config = preset("standard").with_overrides(
+        {
+            "sampling": {"horizons": [3.0]},
+            "risk": {"max_acceptable_risk": 0.002},
+            "commitment": {"relative_margin": 0.5, "absolute_margin": 1000.0},
+        }
+    )
+
+    def decide(planner):
+        planner.plan(situation.ego, situation.road_users)
+        return planner.plan(situation.ego, moved)
+
+    fast = decide(Planner(config, situation.environment))
+    with monkeypatch.context() as patch:
+        patch.setattr(Planner, "_branch_and_bound", _full)
+        full = decide(Planner(config, situation.environment))
+    assert full.continued and full.max_risk_refused > 0
+    assert full.costs["total"] > full.best_by_level[int(Validity.VALID)].cost  # kept above the cheapest
+    _assert_same(fast, full)
+
+
 def test_a_negative_cost_term_makes_the_branch_and_bound_evaluate_every_candidate(monkeypatch):
     """The bound assumes J_risk >= 0; a term that breaks it (here: a rebate on risky plans) is detected.
 
@@ -135,8 +167,8 @@ def test_a_negative_cost_term_makes_the_branch_and_bound_evaluate_every_candidat
 
     exact = planner_module.total_cost
 
-    def with_rebate(*args):
-        costs = exact(*args)
+    def with_rebate(*args, **kwargs):
+        costs = exact(*args, **kwargs)
         weights, levels = args[-1], args[-2]
         j_risk = costs.risk - 100.0 * (costs.bayes > 0)
         total = np.where(
