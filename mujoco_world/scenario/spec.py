@@ -1819,13 +1819,45 @@ class Scenario:
             )
 
 
+#: Road fields only one road kind reads: written for another kind they would be ignored.
+ROAD_FIELDS_OF_ONE_KIND: dict[str, RoadKind] = {
+    "radius": RoadKind.CURVED,
+    "curve_angle": RoadKind.CURVED,
+    "lead_in": RoadKind.CURVED,
+    "corner_radius": RoadKind.INTERSECTION,
+}
+
+
+def _check_road_fields_of_kind(data: dict[str, Any]) -> None:
+    """Refuse a ``[road]`` field written for a road kind that ignores it (e.g. a radius on a straight road).
+
+    Only fields the file sets are checked (the dataclass defaults apply to every kind);
+    an unknown kind is left to the field parser, which names what is allowed.
+    """
+    road = data.get("road")
+    if not isinstance(road, dict):
+        return
+    kind = road.get("kind", RoadKind.STRAIGHT.value)
+    if kind not in {k.value for k in RoadKind}:
+        return
+    for name, only in ROAD_FIELDS_OF_ONE_KIND.items():
+        check(
+            name not in road or kind == only.value,
+            f"road.{name} is only used by road.kind = {only.value!r}, not {kind!r}: remove it or "
+            f"set road.kind = {only.value!r}",
+        )
+
+
 def scenario_from_dict(data: dict[str, Any]) -> Scenario:
     """Build a scenario from nested dicts (as read from TOML).
 
     Raises:
         ValueError: unknown keys or invalid values, naming the field (e.g.
-            ``road_users[2].behaviour.speed``).
+            ``road_users[2].behaviour.speed``), and road fields written for another road
+            kind (``ROAD_FIELDS_OF_ONE_KIND``).
     """
+    if isinstance(data, dict):
+        _check_road_fields_of_kind(data)
     return from_mapping(Scenario, data, "")
 
 

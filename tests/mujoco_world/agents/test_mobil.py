@@ -286,16 +286,46 @@ def _user(behaviour, route=None):
         ),
         ({"kind": "curved", "taper": 30.0}, None, "road.taper is only allowed with road.kind = 'merge'"),
         (
+            {"radius": 60.0},
+            None,
+            "road.radius is only used by road.kind = 'curved', not 'straight': remove it or set "
+            "road.kind = 'curved'",
+        ),
+        (
+            {"kind": "merge", "curve_angle": 30.0},
+            None,
+            "road.curve_angle is only used by road.kind = 'curved'",
+        ),
+        (
+            {"kind": "intersection", "lead_in": 20.0},
+            None,
+            "road.lead_in is only used by road.kind = 'curved'",
+        ),
+        (
+            {"kind": "curved", "corner_radius": 5.0},
+            None,
+            "road.corner_radius is only used by road.kind = 'intersection', not 'curved'",
+        ),
+        (
             {"kind": "merge", "lanes": 3, "lanes_forward": 2},
             None,
             "road.lanes_forward of a merge road must be",
         ),
     ],
 )
-def test_lane_change_and_merge_fields_are_validated_by_name(road, user, message):
+def test_lane_change_merge_and_road_kind_fields_are_validated_by_name(road, user, message):
     data = {"name": "t", "road": road, "road_users": [user] if user else []}
     with pytest.raises(ValueError, match=re.escape(message)):
         scenario_from_dict(data)
+
+
+def test_road_fields_of_their_own_kind_are_accepted():
+    """The kind-specific fields stay allowed on the kind that reads them."""
+    curved = {"kind": "curved", "length": 300.0, "radius": 60.0, "curve_angle": 45.0, "lead_in": 30.0}
+    scenario = scenario_from_dict({"name": "t", "road": curved})
+    assert (scenario.road.radius, scenario.road.curve_angle, scenario.road.lead_in) == (60.0, 45.0, 30.0)
+    crossing = {"kind": "intersection", "length": 160.0, "corner_radius": 5.0}
+    assert scenario_from_dict({"name": "t", "road": crossing}).road.corner_radius == 5.0
 
 
 def test_an_ego_on_the_acceleration_lane_must_start_before_its_taper():
