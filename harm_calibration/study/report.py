@@ -9,7 +9,7 @@ supported, partly supported, not supported, or inconclusive (too few scenarios).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from harm_calibration.study.analysis import GROUP_LABELS, GROUPS, OTHERS, OUTCOMES, TOP_N, StudyAnalysis
@@ -69,6 +69,17 @@ def _describe(test: PairedTest | None, sign: int, a: str, b: str) -> str:
     )
 
 
+def _against_standard(tests: Mapping[str, Sequence[PairedTest]]) -> tuple[list[str], list[str]]:
+    """Ethical and selfish against standard in every group: the looks and the evidence lines."""
+    looks, lines = [], []
+    for group in GROUPS:
+        for planner in ("ethical", "selfish"):
+            test, sign = _find(tests[group], planner, "standard")
+            looks.append(_lower(test, sign))
+            lines.append(f"{GROUP_LABELS[group]}, {_describe(test, sign, planner, 'standard')}")
+    return looks, lines
+
+
 def judge(analysis: StudyAnalysis) -> list[Verdict]:
     """The paper's claims with the study's verdicts (needs planners ethical, selfish, standard)."""
     needed = {"ethical", "selfish", "standard"}
@@ -83,12 +94,7 @@ def judge(analysis: StudyAnalysis) -> list[Verdict]:
     risk = analysis.risk_tests
     verdicts = []
     # 1. Considering risk lowers risk for all groups.
-    looks, lines = [], []
-    for group in GROUPS:
-        for planner in ("ethical", "selfish"):
-            test, sign = _find(risk[group], planner, "standard")
-            looks.append(_lower(test, sign))
-            lines.append(f"{GROUP_LABELS[group]}, {_describe(test, sign, planner, 'standard')}")
+    looks, lines = _against_standard(risk)
     verdicts.append(
         Verdict(
             "Considering risk in planning (ethical, selfish) lowers the risk of every group "
@@ -150,12 +156,7 @@ def judge(analysis: StudyAnalysis) -> list[Verdict]:
         (analysis.harm_tests, "all crashes"),
         (analysis.harm_tests_excluding, "excluding crashes struck from behind by a replay"),
     ):
-        looks, lines = [], []
-        for group in GROUPS:
-            for planner in ("ethical", "selfish"):
-                test, sign = _find(tests[group], planner, "standard")
-                looks.append(_lower(test, sign))
-                lines.append(f"{GROUP_LABELS[group]}, {_describe(test, sign, planner, 'standard')}")
+        looks, lines = _against_standard(tests)
         verdicts.append(
             Verdict(
                 "The simulated accidents confirm the risk distribution: considering risk lowers the "

@@ -8,7 +8,8 @@ Pure functions over arrays (struct of arrays, vectorised over road users):
   in the lanes on either side, read from the bodies' true positions projected onto
   the road user's route (the ego is a body like any other unless a road user is blind
   to it), with a lane's end (a lane drop) as a standing obstacle.
-* ``mobil_step``: the decision of every MOBIL road user at one behaviour tick.
+* ``mobil_accelerations`` / ``mobil_decide``: the accelerations MOBIL weighs and the
+  decision of every MOBIL road user at one behaviour tick.
 
 Conventions: lanes are counted from the right in the road user's direction of
 travel; ``k`` is a lane *relative* to the lane of the road user's route (``+1`` the
@@ -381,36 +382,6 @@ def mobil_accelerations(
     )
 
 
-def mobil_step(
-    nb: Neighbours,
-    me: np.ndarray,
-    v: np.ndarray,
-    idm: IdmParameters,
-    allowed: np.ndarray,
-    politeness: np.ndarray,
-    threshold: np.ndarray,
-    b_safe: np.ndarray,
-    bias_right: np.ndarray,
-    ready: np.ndarray,
-) -> MobilDecision:
-    """MOBIL's decision for m road users from their neighbours.
-
-    Args:
-        nb: leaders and followers in lanes ``current + SIDES`` (``lane_neighbours``).
-        me: (m,) body indices. v: (m,) their speeds [m/s].
-        idm: IDM parameters of every body (the followers' accelerations use theirs).
-        allowed: (m, 3) bool, the lane exists, runs in the road user's direction and has
-            not ended ahead of it (the middle column: its own lane).
-        politeness, threshold, b_safe, bias_right: (m,) MOBIL parameters.
-        ready: (m,) bool, may decide now (not changing lane, cooldown over).
-
-    Returns:
-        The decision; the larger incentive wins if both sides qualify.
-    """
-    accelerations = mobil_accelerations(nb, me, v, idm)
-    return mobil_decide(accelerations, allowed, politeness, threshold, b_safe, bias_right, ready)
-
-
 def mobil_decide(
     acc: MobilAccelerations,
     allowed: np.ndarray,
@@ -420,11 +391,17 @@ def mobil_decide(
     bias_right: np.ndarray,
     ready: np.ndarray,
 ) -> MobilDecision:
-    """MOBIL's decision for m road users from the accelerations it weighs (``mobil_step``'s second half).
+    """MOBIL's decision for m road users from the accelerations it weighs.
 
     Args:
         acc: the accelerations (``mobil_accelerations``, or a blend of two).
-        allowed, politeness, threshold, b_safe, bias_right, ready: as ``mobil_step``.
+        allowed: (m, 3) bool, the lane exists, runs in the road user's direction and has
+            not ended ahead of it (the middle column: its own lane).
+        politeness, threshold, b_safe, bias_right: (m,) MOBIL parameters.
+        ready: (m,) bool, may decide now (not changing lane, cooldown over).
+
+    Returns:
+        The decision; the larger incentive wins if both sides qualify.
     """
     own, follower_now, follower_behind_me = acc.own, acc.follower_now, acc.follower_behind_me
     a_c = own[:, 1:2]

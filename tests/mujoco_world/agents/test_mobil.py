@@ -12,7 +12,8 @@ from mujoco_world.agents.mobil import (
     idm_acceleration,
     lane_layout,
     lane_neighbours,
-    mobil_step,
+    mobil_accelerations,
+    mobil_decide,
 )
 from mujoco_world.loop.world import World
 from mujoco_world.scenario.catalog import get_scenario
@@ -56,8 +57,8 @@ def _decide(bodies, me_offset=0.0, politeness=0.3, threshold=0.1, b_safe=4.0, bi
     current = round(me_offset / W)
     allowed = np.array([[0 <= current + side <= 1 for side in (-1, 0, 1)]])
     one = np.ones(1)
-    return mobil_step(
-        nb, me, np.array([20.0]), idm, allowed,
+    return mobil_decide(
+        mobil_accelerations(nb, me, np.array([20.0]), idm), allowed,
         politeness * one, threshold * one, b_safe * one, bias * one, np.ones(1, dtype=bool),
     )  # fmt: skip
 

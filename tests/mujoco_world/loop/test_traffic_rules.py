@@ -218,8 +218,8 @@ def _zone_world(users=()):
     )
 
 
-def _judge_poses(world, poses, planner_config=None):
-    """The world's judge on an ego placed at ``poses`` (time, x, y) in turn (the ego lane is y = -1.75 m)."""
+def _judge_values(world, poses, planner_config=None):
+    """The judge's values for an ego placed at ``poses`` (time, x, y) in turn (ego lane: y = -1.75 m)."""
     run = SimpleNamespace(
         world=world, scenario=world.scenario, planner_config=planner_config or PlannerConfig()
     )
@@ -229,7 +229,12 @@ def _judge_poses(world, poses, planner_config=None):
         world.scene.data.time = t
         world.scene.qpos[0] = (x, y, 0.0)
         metric.sample(run)
-    return metric.values(run)["rule_violations"]
+    return metric.values(run)
+
+
+def _judge_poses(world, poses, planner_config=None):
+    """The world's judge's rule violations for an ego placed at ``poses`` in turn."""
+    return _judge_values(world, poses, planner_config)["rule_violations"]
 
 
 def test_the_world_judges_crossings_in_the_zone_and_shoulder_use():
@@ -340,15 +345,7 @@ def test_an_evasive_move_onto_the_shoulder_is_excused():
                 "behaviour": {"kind": "scripted", "speed": 10.0}}  # fmt: skip
 
     poses = [(0.0, 60.0, -1.75), (0.1, 60.0, -3.0)]
-    world = _zone_world([ghost(85.0)])
-    run = SimpleNamespace(world=world, scenario=world.scenario, planner_config=PlannerConfig())
-    metric = RuleViolations()
-    metric.start(run)
-    for t, x, y in poses:
-        world.scene.data.time = t
-        world.scene.qpos[0] = (x, y, 0.0)
-        metric.sample(run)
-    values = metric.values(run)
+    values = _judge_values(_zone_world([ghost(85.0)]), poses)
     assert values["rule_violations"] == ()
     (entry,) = values["excused_rule_entries"]
     assert (entry["rule"], entry["line"], entry["excuse"]) == ("shoulder", "right", "evasive")
