@@ -92,7 +92,9 @@ def figure_harm(analysis: StudyAnalysis, out: Path) -> list[Path]:
     axes[0].set_title("all crashes", fontsize=11)
     axes[1].set_title("excluding crashes struck from behind by a replay", fontsize=11)
     axes[0].set_ylabel("summed measured harm\n(expected MAIS3+ injuries)", fontsize=11)
-    axes[0].legend(fontsize=9)
+    # Below the panels: inside, the legend covered the tallest whiskers.
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=len(labels), fontsize=9)
     fig.suptitle(f"Fig. 6: harm of the collisions in {len(analysis.scenarios)} scenarios", fontsize=12)
     paths = _save(fig, out, "fig6_harm")
     plt.close(fig)
