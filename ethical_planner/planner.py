@@ -486,6 +486,11 @@ class Planner:
         position = np.full(n, -1)
         position[considered] = np.arange(considered.size)
         with_onset = config.weights.responsibility != 0.0
+        # Comfort's and mobility's inputs need no risk: once for every assessed candidate
+        # (row by row, so a subset's values are those of the subset computed alone).
+        free = self._risk_free_terms(candidates, assessed)
+        slot = np.full(n, -1)
+        slot[assessed] = np.arange(assessed.size)
 
         def evaluate(rows: np.ndarray) -> _Assessed:
             """Risk, responsibility and cost of candidates ``rows`` (the stage timers run)."""
@@ -540,12 +545,14 @@ class Planner:
                 )
             timings["responsibility"] = timings.get("responsibility", 0.0) + _since(clock)
             clock = _clock()
-            costs = self._costs(candidates, risk, r_obs, r_ego, row_levels)
+            costs = self._costs(
+                candidates, risk, r_obs, r_ego, row_levels, [term[slot[rows]] for term in free]
+            )
             timings["cost"] = timings.get("cost", 0.0) + _since(clock)
             return _Assessed(risk, r_obs, r_ego, row_levels, costs)
 
         if best == Validity.VALID:
-            assessed_part = self._branch_and_bound(candidates, assessed, evaluate)
+            assessed_part = self._branch_and_bound(candidates, assessed, free, evaluate)
         else:
             # Eq. 6 (risk alone) decides below the valid level: no risk-free part bounds it.
             assessed_part = evaluate(assessed)
@@ -578,6 +585,7 @@ class Planner:
         self,
         candidates: Candidates,
         assessed: np.ndarray,
+        free: Sequence[np.ndarray],
         evaluate: Callable[[np.ndarray], _Assessed],
     ) -> _Assessed:
         """Risk of the candidates ``assessed`` that can be chosen or refused by R_max (Eq. 5).
@@ -607,6 +615,7 @@ class Planner:
             candidates: the cycle's candidates.
             assessed: the candidates that may be chosen (integral-free level valid or
                 breaks a traffic rule), indices, shape (m,).
+            free: their ``_risk_free_terms``, shape (m,) each.
             evaluate: risk, responsibility and cost of some of them.
 
         Returns:
@@ -614,9 +623,7 @@ class Planner:
         """
         weights = self.config.weights
         rows = assessed
-        comfort, mobility = comfort_and_mobility(
-            *self._risk_free_terms(candidates, rows), weights, self._oncoming(candidates, rows)
-        )
+        comfort, mobility = comfort_and_mobility(*free, weights, self._oncoming(candidates, rows))
         bound = eq5_cost(np.zeros(rows.size), comfort, mobility, weights)
         order = np.argsort(bound, kind="stable")
         first = np.flatnonzero(candidates.kind[rows] == CandidateKind.CONTINUATION)
@@ -686,8 +693,11 @@ class Planner:
         r_obs: np.ndarray | None,
         r_ego: np.ndarray | None,
         levels: np.ndarray,
+        free: Sequence[np.ndarray],
     ) -> CostBreakdown:
         """Eqs. 5-11 of the assessed candidates ``risk.rows``, whose levels are ``levels`` (m,).
+
+        ``free`` holds their ``_risk_free_terms``, shape (m,) each.
 
         Without responsibilities (weight 0) J_R is left 0: it does not enter the total.
         """
@@ -712,7 +722,7 @@ class Planner:
             harms,
             counted,
             risk.ego_combined,
-            *self._risk_free_terms(candidates, risk.rows),
+            *free,
             levels,
             config.weights,
             **({} if oncoming is None else {"lanes_oncoming": oncoming}),

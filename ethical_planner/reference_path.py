@@ -138,26 +138,15 @@ class ReferencePath:
         shape = np.broadcast_shapes(x.shape, y.shape)
         px = np.broadcast_to(x, shape).ravel()
         py = np.broadcast_to(y, shape).ravel()
-        _, nearest = self._tree.query(np.column_stack([px, py]))
+        if px.size * self.s.size <= _BRUTE_FORCE_PAIRS:
+            nearest = np.empty(px.size, dtype=np.int64)
+            _nearest_sample(px, py, self.x, self.y, nearest)
+        else:
+            _, nearest = self._tree.query(np.column_stack([px, py]))
         # Project onto the segment after (or, at the end, before) the nearest sample.
         best_s = np.empty_like(px)
-        best_d = np.full_like(px, np.inf)
-        last = len(self.s) - 1
-        for start in (np.minimum(nearest, last - 1), np.maximum(nearest - 1, 0)):
-            ax, ay = self.x[start], self.y[start]
-            ex, ey = self.x[start + 1] - ax, self.y[start + 1] - ay
-            seg = np.hypot(ex, ey)
-            ux, uy = ex / seg, ey / seg
-            along = (px - ax) * ux + (py - ay) * uy
-            # Only the first and the last segment extend beyond the path's ends.
-            lo = np.where(start == 0, -np.inf, 0.0)
-            hi = np.where(start == last - 1, np.inf, seg)
-            along = np.clip(along, lo, hi)
-            lateral = -(px - ax) * uy + (py - ay) * ux
-            dist = np.hypot(px - (ax + along * ux), py - (ay + along * uy))
-            better = dist < np.abs(best_d) - 1e-12
-            best_s = np.where(better, self.s[start] + along, best_s)
-            best_d = np.where(better, np.copysign(dist, lateral), best_d)
+        best_d = np.empty_like(px)
+        _project(px, py, np.asarray(nearest, dtype=np.int64), self.s, self.x, self.y, best_s, best_d)
         return best_s.reshape(shape), best_d.reshape(shape)
 
 
@@ -206,7 +195,72 @@ def cartesian_states(
     return out[0], out[1], out[2], out[3], out[4], out[5]
 
 
+#: ``to_frenet`` finds the nearest sample by comparing every (point, sample) pair up to
+#: this many pairs (one point on a path of up to ~20,000 samples, ~1 ns a pair), and by
+#: the k-d tree beyond (whose call alone costs tens of microseconds).
+_BRUTE_FORCE_PAIRS = 20_000
+
 # --- compiled kernels ------------------------------------------------------------------------
+
+
+@kernel
+def _nearest_sample(
+    px: np.ndarray, py: np.ndarray, path_x: np.ndarray, path_y: np.ndarray, out: np.ndarray
+) -> None:
+    """Index of the path sample nearest to each point (squared Euclidean distance), out (m,).
+
+    The first of equally near samples; the k-d tree finds the same sample unless two are
+    equally near to the last bit.
+    """
+    for i in range(px.size):
+        best, nearest = math.inf, 0
+        for j in range(path_x.size):
+            dx, dy = path_x[j] - px[i], path_y[j] - py[i]
+            distance = dx * dx + dy * dy
+            if distance < best:
+                best, nearest = distance, j
+        out[i] = nearest
+
+
+@kernel
+def _project(
+    px: np.ndarray,
+    py: np.ndarray,
+    nearest: np.ndarray,
+    path_s: np.ndarray,
+    path_x: np.ndarray,
+    path_y: np.ndarray,
+    best_s: np.ndarray,
+    best_d: np.ndarray,
+) -> None:
+    """Kernel of ``ReferencePath.to_frenet``: each point onto the segments beside its nearest sample.
+
+    The segment after the nearest sample (before it at the path's end) is tried first,
+    then the one before it (after it at the start); the second replaces the first only
+    if it is nearer by more than 1e-12 m. Only the first and the last segment extend
+    beyond the path's ends. Writes best_s (arc length of the foot point [m]) and best_d
+    (signed lateral offset [m], positive to the left), shape (m,) each.
+    """
+    last = path_s.size - 1
+    for i in range(px.size):
+        x, y = px[i], py[i]
+        found = math.inf
+        for attempt in range(2):
+            j = min(nearest[i], last - 1) if attempt == 0 else max(nearest[i] - 1, 0)
+            ax, ay = path_x[j], path_y[j]
+            ex, ey = path_x[j + 1] - ax, path_y[j + 1] - ay
+            seg = math.hypot(ex, ey)
+            ux, uy = ex / seg, ey / seg
+            along = (x - ax) * ux + (y - ay) * uy
+            lo = -math.inf if j == 0 else 0.0
+            hi = math.inf if j == last - 1 else seg
+            along = min(max(along, lo), hi)
+            lateral = -(x - ax) * uy + (y - ay) * ux
+            dist = math.hypot(x - (ax + along * ux), y - (ay + along * uy))
+            if dist < abs(found) - 1e-12:
+                best_s[i] = path_s[j] + along
+                found = math.copysign(dist, lateral)
+        best_d[i] = found
 
 
 @kernel

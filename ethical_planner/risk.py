@@ -28,6 +28,7 @@ from ethical_planner.environment import RoadEnvironment
 from ethical_planner.geometry import rectangle_corners
 from ethical_planner.harm import HarmModel, boundary_harm, collision_harm, collision_harm_at
 from ethical_planner.impulse import DeltaVModel
+from ethical_planner.jit import kernel
 from ethical_planner.prediction.base import Prediction
 from ethical_planner.road_users import RoadUserType, Shape
 from ethical_planner.sampling import Candidates
@@ -89,6 +90,8 @@ class RiskDetail:
 #: arc approximation (r (1 - cos(pi / 32)) < 0.5 % of r at quad_segs = 8) and rounding.
 _ERODE_MARGIN = 0.05
 _ERODED: dict[tuple[int, float], tuple[object, object, _InsideGrid | None]] = {}
+#: The drivable areas' own grids (``_area_grid``), by id, with the area kept alive.
+_AREA_GRIDS: dict[int, tuple[object, _InsideGrid | None]] = {}
 #: Cells of an ``_InsideGrid`` (about: rounded up per axis), and their smallest edge [m].
 _GRID_CELLS = 40_000
 _GRID_MIN_CELL = 0.5
@@ -130,13 +133,33 @@ class _InsideGrid:
 
     def contains(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """True where the point lies in a marked cell (so in the polygon), shape of ``x``."""
-        ix = np.floor((x - self.x0) / self.cell)
-        iy = np.floor((y - self.y0) / self.cell)
-        ny, nx = self.inside.shape
-        within = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
-        result = np.zeros(x.shape, dtype=bool)
-        result[within] = self.inside[iy[within].astype(np.int64), ix[within].astype(np.int64)]
+        result = np.empty(x.shape, dtype=np.bool_)
+        _in_marked_cell(
+            np.ascontiguousarray(x, dtype=float).reshape(-1),
+            np.ascontiguousarray(y, dtype=float).reshape(-1),
+            self.x0,
+            self.y0,
+            self.cell,
+            self.inside,
+            result.reshape(-1),
+        )
         return result
+
+
+@kernel
+def _in_marked_cell(
+    x: np.ndarray, y: np.ndarray, x0: float, y0: float, cell: float, inside: np.ndarray, out: np.ndarray
+) -> None:
+    """Kernel of ``_InsideGrid.contains``: out (m,) True where (x, y) lies in a marked cell.
+
+    The cell indices are floor((x - x0) / cell) and floor((y - y0) / cell); a point off
+    the grid (or NaN) is in no cell.
+    """
+    ny, nx = inside.shape
+    for i in range(x.size):
+        ix = np.floor((x[i] - x0) / cell)
+        iy = np.floor((y[i] - y0) / cell)
+        out[i] = ix >= 0 and ix < nx and iy >= 0 and iy < ny and inside[int(iy), int(ix)]
 
 
 def _eroded_area(area: shapely.Geometry, radius: float) -> tuple[shapely.Geometry, _InsideGrid | None]:
@@ -151,6 +174,17 @@ def _eroded_area(area: shapely.Geometry, radius: float) -> tuple[shapely.Geometr
         # The entry keeps ``area`` alive, so its id cannot be reused while cached.
         cached = _ERODED[key] = (area, inner, _InsideGrid.of(inner))
     return cached[1], cached[2]
+
+
+def _area_grid(area: shapely.Geometry) -> _InsideGrid | None:
+    """The grid of ``area`` itself (``_InsideGrid``), cached per area object."""
+    cached = _AREA_GRIDS.get(id(area))
+    if cached is None or cached[0] is not area:
+        if len(_AREA_GRIDS) >= 8:
+            _AREA_GRIDS.clear()
+        # The entry keeps ``area`` alive, so its id cannot be reused while cached.
+        cached = _AREA_GRIDS[id(area)] = (area, _InsideGrid.of(area))
+    return cached[1]
 
 
 def _contains(
@@ -201,7 +235,7 @@ def outside_drivable_area(
     if edge.size:
         poses = (x.ravel()[edge], y.ravel()[edge], yaw.ravel()[edge])
         cx, cy = rectangle_corners(*poses, shape.length, shape.width)
-        corners_in = np.all(shapely.contains_xy(area, cx, cy), axis=-1)
+        corners_in = np.all(_contains(area, _area_grid(area), cx, cy), axis=-1)
         holes = _holes(area)
         if holes is not None and corners_in.any():
             # A hole (debris) smaller than the footprint can lie between its corners:

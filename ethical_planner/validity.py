@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from enum import IntEnum
 
 import numpy as np
 
 from ethical_planner.config import VehicleConfig
+from ethical_planner.jit import kernel
 from ethical_planner.sampling import Candidates
 
 #: A small negative Frenet speed tolerated before a candidate counts as reversing [m/s].
@@ -62,20 +64,57 @@ def physically_invalid(candidates: Candidates, vehicle: VehicleConfig) -> dict[s
     ego braking at its limit, seen through the physics) would otherwise make every
     candidate invalid, and the planner would fall back to whatever level 1 offers.
     """
-    v, a, kappa = candidates.v[:, 1:], candidates.a[:, 1:], candidates.kappa[:, 1:]
-    s_dot = candidates.s_dot[:, 1:]
-    moving = v > vehicle.curvature_check_speed
-    lateral = np.square(v) * np.abs(kappa)
     slack = _ACCELERATION_TOLERANCE
-    return {
-        "speed": np.any(v > vehicle.v_max, axis=1) | np.any(s_dot < -_REVERSE_TOLERANCE, axis=1),
-        "acceleration": np.any(
-            (a > vehicle.a_max + slack) | (a < -vehicle.emergency_deceleration - slack), axis=1
-        ),
-        "curvature": np.any(moving & (np.abs(kappa) > vehicle.steering_curvature), axis=1),
-        "lateral_acceleration": np.any(moving & (lateral > vehicle.max_lateral_acceleration), axis=1),
-        "friction": np.any(moving & (np.hypot(a, lateral) > vehicle.friction_acceleration + slack), axis=1),
-    }
+    limits = np.array(
+        [
+            vehicle.v_max,
+            -_REVERSE_TOLERANCE,
+            vehicle.a_max + slack,
+            -vehicle.emergency_deceleration - slack,
+            vehicle.curvature_check_speed,
+            vehicle.steering_curvature,
+            vehicle.max_lateral_acceleration,
+            vehicle.friction_acceleration + slack,
+        ]
+    )
+    broken = np.zeros((len(LIMITS), candidates.v.shape[0]), dtype=np.bool_)
+    _limits_broken(
+        *(np.ascontiguousarray(getattr(candidates, name)) for name in ("v", "a", "kappa", "s_dot")),
+        limits,
+        broken,
+    )
+    return dict(zip(LIMITS, broken, strict=True))
+
+
+@kernel
+def _limits_broken(
+    v: np.ndarray, a: np.ndarray, kappa: np.ndarray, s_dot: np.ndarray, limits: np.ndarray, out: np.ndarray
+) -> None:
+    """Kernel of ``physically_invalid``: out (5, n) per ``LIMITS``, from step 1 on.
+
+    ``limits``: v_max, the reversing speed, the acceleration's upper and lower limit,
+    the curvature check's speed, the steering curvature, the lateral acceleration
+    limit and the friction circle's radius (the last three with their slack where it
+    applies). The tests are those of the numpy expressions they replace: v^2 |kappa| as
+    ``np.square(v) * np.abs(kappa)`` and the friction circle by ``hypot``.
+    """
+    v_max, reverse, a_hi, a_lo, check_speed, steering, lateral_max, friction = limits
+    n, n_t = v.shape
+    for row in range(n):
+        for step in range(1, n_t):
+            speed, acc, curv = v[row, step], a[row, step], kappa[row, step]
+            if speed > v_max or s_dot[row, step] < reverse:
+                out[0, row] = True
+            if acc > a_hi or acc < a_lo:
+                out[1, row] = True
+            if speed > check_speed:
+                lateral = (speed * speed) * abs(curv)
+                if abs(curv) > steering:
+                    out[2, row] = True
+                if lateral > lateral_max:
+                    out[3, row] = True
+                if math.hypot(acc, lateral) > friction:
+                    out[4, row] = True
 
 
 def validity_levels(

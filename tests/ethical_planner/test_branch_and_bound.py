@@ -40,7 +40,7 @@ def _street(seed: int):
     return env, KinematicState(0.0, 0.0, 0.0, rng.uniform(6, 14)), tuple(users)
 
 
-def _full(self, candidates, assessed, evaluate):
+def _full(self, candidates, assessed, free, evaluate):
     """Every candidate assessed (the reference)."""
     return evaluate(assessed)
 

@@ -26,6 +26,32 @@ def test_frenet_round_trip_on_gentle_curve(s, d):
     assert d2[0] == pytest.approx(d, abs=1e-2)
 
 
+def test_projection_of_one_point_equals_that_of_many_and_a_brute_force_foot_point():
+    # One point finds its nearest sample by comparing every sample, many points by the
+    # k-d tree: the same foot points to the bit. Near the path both equal the foot
+    # point on the nearest segment found by numpy over every segment.
+    theta = np.linspace(0.0, 2.5 * np.pi, 90)
+    path = ReferencePath.from_polyline(np.c_[40 * np.cos(theta) + 12 * theta, 25 * np.sin(theta)])
+    rng = np.random.default_rng(7)
+    s_true = rng.uniform(-5.0, path.length + 5.0, 400)
+    d_true = rng.uniform(-4.0, 4.0, 400)
+    x, y = path.to_cartesian(s_true, d_true)
+    many = path.to_frenet(x, y)
+    one = np.array([path.to_frenet(np.array(a), np.array(b)) for a, b in zip(x, y, strict=True)])
+    np.testing.assert_array_equal(one[:, 0], many[0])
+    np.testing.assert_array_equal(one[:, 1], many[1])
+    ax, ay, bx, by = path.x[:-1], path.y[:-1], path.x[1:], path.y[1:]
+    ex, ey = bx - ax, by - ay
+    u = ((x[:, None] - ax) * ex + (y[:, None] - ay) * ey) / (ex**2 + ey**2)
+    u = np.clip(u, 0.0, 1.0)  # points beyond the ends are not compared
+    fx, fy = ax + u * ex - x[:, None], ay + u * ey - y[:, None]
+    distance = np.hypot(fx, fy)
+    nearest = distance.argmin(axis=1)
+    inner = (s_true > 0.5) & (s_true < path.length - 0.5)
+    np.testing.assert_allclose(np.abs(many[1][inner]), distance[np.arange(400), nearest][inner], atol=1e-9)
+    np.testing.assert_allclose(many[1][inner], d_true[inner], atol=0.05)  # the polyline vs the spline
+
+
 def test_straight_extension_beyond_the_ends():
     path = ReferencePath.from_polyline([[0, 0], [10, 0]])
     x, y = path.to_cartesian(np.array([15.0, -5.0]), np.array([1.0, -1.0]))

@@ -248,3 +248,33 @@ def test_a_road_user_touching_the_ego_now_but_pulling_away_leaves_valid_plans():
     # which R_max refuses alike for every candidate); judging t = 0 made every one level 1.
     assert decision.level >= Validity.ABOVE_MAX_RISK
     assert decision.level_counts.get(int(Validity.COLLISION), 0) < sum(decision.level_counts.values()) // 2
+
+
+def test_limits_kernel_equals_the_numpy_expressions_on_random_plans():
+    # The compiled test against the limits written as numpy array expressions, on plans
+    # that straddle every limit (values drawn around each bound) and with NaN steps.
+    rng = np.random.default_rng(3)
+    n, n_t = 400, 12
+    v = rng.choice([0.05, 0.1, 0.11, 1.3, 14.0, 29.99, 30.0, 30.01], (n, n_t)) + rng.normal(0, 0.02, (n, n_t))
+    a = rng.uniform(-8.2, 5.2, (n, n_t))
+    kappa = rng.normal(0.0, 0.1, (n, n_t))
+    s_dot = v + rng.normal(0.0, 0.05, (n, n_t)) - 0.05
+    v[rng.random((n, n_t)) < 0.01] = np.nan
+    plans = SimpleNamespace(v=v, a=a, kappa=kappa, s_dot=s_dot)
+    got = physically_invalid(plans, VEHICLE)
+    v, a, kappa, s_dot = v[:, 1:], a[:, 1:], kappa[:, 1:], s_dot[:, 1:]
+    moving = v > VEHICLE.curvature_check_speed
+    lateral = np.square(v) * np.abs(kappa)
+    slack = 1e-6
+    expected = {
+        "speed": np.any(v > VEHICLE.v_max, axis=1) | np.any(s_dot < -0.05, axis=1),
+        "acceleration": np.any(
+            (a > VEHICLE.a_max + slack) | (a < -VEHICLE.emergency_deceleration - slack), axis=1
+        ),
+        "curvature": np.any(moving & (np.abs(kappa) > VEHICLE.steering_curvature), axis=1),
+        "lateral_acceleration": np.any(moving & (lateral > VEHICLE.max_lateral_acceleration), axis=1),
+        "friction": np.any(moving & (np.hypot(a, lateral) > VEHICLE.friction_acceleration + slack), axis=1),
+    }
+    for name in LIMITS:
+        np.testing.assert_array_equal(got[name], expected[name], err_msg=name)
+        assert 0 < expected[name].sum() < n, name  # the draw straddles every limit
