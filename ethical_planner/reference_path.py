@@ -373,7 +373,11 @@ def _cartesian_states(
             along_dot = s_ddot * one_minus_kd - s_dot * ((dkappa_r * s_dot) * d + kappa_r * d_dot)
             acc_t = along_dot - (across * s_dot) * kappa_r
             acc_n = (along * s_dot) * kappa_r + d_ddot
-            speed = math.hypot(along, across)
+            # Along the path (d' = 0, a plan past its lateral horizon) hypot(along, +-0) is
+            # |along| and atan2(+-0, x > 0) is +-0 exactly (C99 Annex F): the same values
+            # without the calls.
+            sideways = across != 0.0
+            speed = math.hypot(along, across) if sideways else abs(along)
             if speed > 1e-3:
                 safe = max(speed, 1e-9)
                 out[4, traj, step] = (along * acc_t + across * acc_n) / safe
@@ -381,9 +385,10 @@ def _cartesian_states(
                 # Rolling back (within the validity check's reversing tolerance) keeps
                 # the nose forward: a car does not turn round to creep backwards.
                 if along >= 0.0:
-                    out[2, traj, step] = math.atan2(across, along) + theta_r
+                    heading = math.atan2(across, along) if sideways else across
                 else:
-                    out[2, traj, step] = math.atan2(-across, -along) + theta_r
+                    heading = math.atan2(-across, -along) if sideways else -across
+                out[2, traj, step] = heading + theta_r
                 last_moving = step
             else:
                 out[4, traj, step] = s_ddot
