@@ -16,17 +16,18 @@ collision from what the run record holds of it:
 * how the other body moved: ``BodyRecord.behaviour`` (``recorded``: a replay, blind to the
   ego).
 
-The run's crash is the class of its first ego-involved collision (later contacts of the
-same run are its consequences: an ego pushed into the car ahead).
+The approach speeds and the test "the ego drove into it" are ``mujoco_world.evaluation.
+compare.approach_speed`` and ``ego_strikes`` (the scenario language's ``[expect]
+ego_strikes`` checks the same). The run's crash is the class of its first ego-involved
+collision (later contacts of the same run are its consequences: an ego pushed into the
+car ahead).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 
-from mujoco_world.evaluation.compare import ImpactRecord
-from mujoco_world.physics.impact import BodyImpact
+from mujoco_world.evaluation.compare import ImpactRecord, approach_speed, ego_strikes
 
 #: Classes of an ego-involved collision, with what each means (report.md and the README).
 ATTRIBUTIONS: dict[str, str] = {
@@ -41,25 +42,6 @@ ATTRIBUTIONS: dict[str, str] = {
 STRUCK_FROM_BEHIND_BY_REPLAY = "struck_from_behind_by_replay"
 #: ``BodyRecord.behaviour`` of a replayed recording.
 REPLAY = "recorded"
-
-
-def approach_speed(body: BodyImpact, contact: tuple[float, float]) -> float:
-    """Velocity of ``body`` towards the contact point before the impact [m/s].
-
-    Args:
-        body: one body of the impact (world frame).
-        contact: contact point (x, y) [m], world frame.
-
-    Returns:
-        v . (c - p) / |c - p|; 0 for a static body or a contact at the centre.
-    """
-    if body.is_static:
-        return 0.0
-    dx, dy = contact[0] - body.position[0], contact[1] - body.position[1]
-    norm = math.hypot(dx, dy)
-    if norm == 0.0:
-        return 0.0
-    return (body.velocity[0] * dx + body.velocity[1] * dy) / norm
 
 
 def attribute(impact: ImpactRecord, behaviours: Mapping[int, str | None]) -> str:
@@ -78,8 +60,7 @@ def attribute(impact: ImpactRecord, behaviours: Mapping[int, str | None]) -> str
     ego, other = (m.a, m.b) if m.a.entity == 0 else (m.b, m.a)
     if other.is_static:
         return "ego_into_static"
-    contact = m.contact_position
-    if approach_speed(ego, contact) >= approach_speed(other, contact):
+    if ego_strikes(impact):
         return "ego_strikes"
     replay = behaviours.get(other.entity) == REPLAY
     if ego.reduced_area == "rear":

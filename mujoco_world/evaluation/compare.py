@@ -105,6 +105,43 @@ class ImpactRecord:
         return to_plain(self)
 
 
+def approach_speed(body: BodyImpact, contact: tuple[float, float]) -> float:
+    """Velocity of ``body`` towards the contact point before the impact [m/s].
+
+    Args:
+        body: one body of the impact (world frame).
+        contact: contact point (x, y) [m], world frame.
+
+    Returns:
+        v . (c - p) / |c - p|; 0 for a static body or a contact at the centre.
+    """
+    if body.is_static:
+        return 0.0
+    dx, dy = contact[0] - body.position[0], contact[1] - body.position[1]
+    norm = math.hypot(dx, dy)
+    if norm == 0.0:
+        return 0.0
+    return (body.velocity[0] * dx + body.velocity[1] * dy) / norm
+
+
+def ego_strikes(impact: ImpactRecord) -> bool:
+    """True if the ego drove into the other body of ``impact`` itself.
+
+    It did if the other body is fixed (a wall, kerb, debris or obstacle), or if the
+    ego's approach speed to the contact point (``approach_speed``) is at least the
+    other road user's: a leader hit from behind moves away from its rear contact, a
+    car that drifts into the ego's side approaches it faster than the ego does.
+    False for a collision without the ego.
+    """
+    if not impact.involves_ego:
+        return False
+    m = impact.measurement
+    ego, other = (m.a, m.b) if m.a.entity == 0 else (m.b, m.a)
+    if other.is_static:
+        return True
+    return approach_speed(ego, m.contact_position) >= approach_speed(other, m.contact_position)
+
+
 def group_of(body: BodyImpact) -> str:
     """Group of a body in the paper's Figs. 5 and 6: ego, third_party, vulnerable (or static)."""
     if body.is_static:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ethical_planner.registry import Registry
+from mujoco_world.evaluation.compare import ego_strikes
 from mujoco_world.loop.summary import ExpectationResult, RunSummary
 from mujoco_world.scenario.spec import ExpectSpec
 
@@ -48,8 +49,16 @@ for _name, _item in {
     "outcome": Expectation(lambda s: s.outcome, "in", "the run's outcome is one of these"),
     "reach_goal": Expectation(lambda s: s.outcome == "goal", "==", "the ego reaches its goal"),
     "ego_collision": Expectation(lambda s: s.ego_collided, "==", "the ego takes part in a collision"),
+    "ego_strikes": Expectation(
+        lambda s: any(ego_strikes(c) for c in s.ego_collisions),
+        "==",
+        "the ego drives into a body itself (a fixed one, or a road user approaching the contact no faster)",
+    ),
     "collision": Expectation(lambda s: bool(s.collisions), "==", "any collision happens"),
     "max_collisions": Expectation(lambda s: len(s.collisions), "<=", "measured collisions, at most"),
+    "max_ego_collisions": Expectation(
+        lambda s: len(s.ego_collisions), "<=", "measured collisions of the ego, at most"
+    ),
     "max_ego_harm": Expectation(_harm("ego"), "<=", "measured harm of the ego, at most"),
     "max_third_party_harm": Expectation(
         _harm("third_party"), "<=", "measured harm of third parties (summed), at most"

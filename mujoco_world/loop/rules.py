@@ -7,7 +7,9 @@ run. ``default_rules`` gives the built-in ones in their order:
 1. ``Diverged``: the simulation cannot be trusted (NaN state, MuJoCo's bad
    acceleration warning, a penetration beyond the bound): ``failed``.
 2. ``CrashAtRest``: after a crash, every body that touched something has been at
-   rest for ``settle_time`` with no open contact episode: ``crash``.
+   rest for ``settle_time`` with no open contact episode: ``crash`` (not while the
+   ego drives on under the ``continue`` post-crash policy: an ego that waits at a
+   red light after a contact will drive on).
 3. ``PostCrashTime``: ``post_crash_time`` after the crash: ``crash``.
 4. ``Goal``: before any crash, the ego passed its goal on its route: ``goal``.
 
@@ -143,6 +145,11 @@ class Diverged(StopRule):
 class CrashAtRest(StopRule):
     """After a crash, the bodies that touched have been at rest long enough: ``crash``.
 
+    Not while the ego keeps following its plans after its contact (``World.ego_on_plan``
+    under the ``continue`` post-crash policy): resting, it may be waiting (at a red
+    light, for a pedestrian) and drive on, so ``PostCrashTime`` or the time limit ends
+    such a run.
+
     Args:
         rest_speed: a body below this speed is at rest [m/s].
         settle_time: how long they must rest, with no contact episode open [s]
@@ -162,9 +169,9 @@ class CrashAtRest(StopRule):
 
     def check(self, run: RunState) -> Stop | None:
         """``crash`` once the crashed bodies have rested ``settle_time``."""
-        if run.crash_time is None:
-            return None
         world = run.world
+        if run.crash_time is None or (world.crashed[0] and world.ego_on_plan):
+            return None
         speeds = world.scene.speeds()[world.crashed]
         if world.recorder.has_open_episodes or not bool((speeds < self.rest_speed).all()):
             self._since = None

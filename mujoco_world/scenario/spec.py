@@ -1454,8 +1454,15 @@ class ExpectSpec:
         outcome: accepted run outcomes (one name or a list).
         reach_goal: the ego reaches its goal (outcome ``goal``).
         ego_collision: the ego takes part in a collision.
+        ego_strikes: the ego drives into something itself in one of its collisions: a
+            fixed body (wall, kerb, debris, obstacle), or a road user whose approach
+            speed to the contact is not above the ego's
+            (``mujoco_world.evaluation.compare.ego_strikes``). ``false`` with
+            ``ego_collision = true``: the ego was hit, and hit nobody itself.
         collision: any collision happens (the ego's or others').
         max_collisions: at most this many measured collisions.
+        max_ego_collisions: at most this many measured collisions the ego takes part
+            in (1: no second impact after being hit).
         max_ego_harm, max_third_party_harm, max_vulnerable_harm: at most this much
             measured harm in the group (the summary's ``harm``).
         min_distance: the ego keeps at least this distance to every road user [m].
@@ -1469,8 +1476,10 @@ class ExpectSpec:
     outcome: str | tuple[str, ...] = ()
     reach_goal: bool | None = None
     ego_collision: bool | None = None
+    ego_strikes: bool | None = None
     collision: bool | None = None
     max_collisions: int | None = None
+    max_ego_collisions: int | None = None
     max_ego_harm: float | None = None
     max_third_party_harm: float | None = None
     max_vulnerable_harm: float | None = None
@@ -1489,13 +1498,13 @@ class ExpectSpec:
         bad = [o for o in outcome if o not in OUTCOMES]
         check(not bad, f"expect.outcome must name outcomes among {', '.join(OUTCOMES)}, got {bad}")
         object.__setattr__(self, "outcome", outcome)
-        for name in ("reach_goal", "ego_collision", "collision"):
+        for name in ("reach_goal", "ego_collision", "ego_strikes", "collision"):
             value = getattr(self, name)
             check(
                 value is None or isinstance(value, bool),
                 f"expect.{name} must be true or false, got {value!r}",
             )
-        for name in ("max_collisions", "max_rule_violations"):
+        for name in ("max_collisions", "max_ego_collisions", "max_rule_violations"):
             value = getattr(self, name)
             check(
                 value is None or (isinstance(value, int) and not isinstance(value, bool)) and value >= 0,

@@ -70,6 +70,7 @@ class FakeWorld:
         self.progress = 0.0
         self.goal_s = 100.0
         self.why = None
+        self.ego_on_plan = True  # before a contact, or after it under the continue policy
         self.scene = SimpleNamespace(speeds=lambda: self.speeds, dt=0.001)
         self.recorder = SimpleNamespace(has_open_episodes=False, touched=np.zeros(n, dtype=bool))
 
@@ -102,6 +103,7 @@ def test_crash_at_rest_waits_for_settle_time_without_open_episodes():
     run = fake_run(world, crash_time=0.5)
     rule.start(run)
     world.crashed[:] = True
+    world.ego_on_plan = False  # the brake policy
     world.speeds[:] = 0.05
     world.time = 1.0
     assert rule.check(run) is None  # rest begins at 1.0 s
@@ -123,11 +125,28 @@ def test_crash_at_rest_needs_a_crash_and_every_crashed_body_at_rest():
     rule = CrashAtRest(0.1, 0.0, 10)
     rule.start(fake_run(world))
     world.speeds[:] = 0.0
+    world.ego_on_plan = False
     assert rule.check(fake_run(world, crash_time=None)) is None
     world.crashed[:] = True
     world.speeds[1] = 0.2  # one crashed body still slides
     assert rule.check(fake_run(world, crash_time=0.0)) is None
     world.speeds[1] = 0.0
+    assert rule.check(fake_run(world, crash_time=0.0)).outcome == "crash"
+
+
+def test_crash_at_rest_waits_while_a_crashed_ego_drives_on_its_plans():
+    # Under the continue policy a crashed ego at rest may be waiting (at a red light):
+    # only PostCrashTime or the time limit end such a run.
+    world = FakeWorld()
+    rule = CrashAtRest(0.1, 0.0, 10)
+    rule.start(fake_run(world))
+    world.speeds[:] = 0.0
+    world.crashed[:] = True
+    assert world.ego_on_plan
+    assert rule.check(fake_run(world, crash_time=0.0)) is None
+    # A crash between two other road users (AnyContact) with the ego untouched still
+    # ends once they rest, the ego on its plans or not.
+    world.crashed[0] = False
     assert rule.check(fake_run(world, crash_time=0.0)).outcome == "crash"
 
 

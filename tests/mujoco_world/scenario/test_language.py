@@ -9,11 +9,13 @@ import pytest
 
 from ethical_planner.records import from_mapping, to_plain
 from ethical_planner.risk import outside_drivable_area
-from ethical_planner.road_users import RoadUserType, Shape
+from ethical_planner.road_users import KinematicState, RoadUserType, Shape
+from mujoco_world.evaluation.compare import compare_impact
 from mujoco_world.loop.expectations import EXPECTATIONS, check_expectations
 from mujoco_world.loop.runner import run_scenario
 from mujoco_world.loop.summary import RunSummary
 from mujoco_world.loop.world import PARK_ORIGIN_M, World
+from mujoco_world.physics.impact import measure_impact
 from mujoco_world.physics.scene import STATIC
 from mujoco_world.scenario.road import build_road, debris_boxes
 from mujoco_world.scenario.spec import (
@@ -281,6 +283,46 @@ def test_expectations_pass_and_fail_by_hand():
     assert [r.passed for r in stricter] == [False]
 
 
+def _impact(ego, other, ego_entity=0):
+    """A measured car-car impact (``physics.impact.measure_impact``), the ego first."""
+    m = measure_impact("car", ego, "car", other, shape_a=(4.5, 1.8), shape_b=(4.5, 1.8))
+    assert m is not None
+    if ego_entity != 0:  # two other road users
+        m = dataclasses.replace(m, a=dataclasses.replace(m.a, entity=ego_entity))
+    return compare_impact(m)
+
+
+def test_ego_strikes_and_max_ego_collisions_tell_a_struck_ego_from_one_that_strikes():
+    # Approach speeds by hand: the ego at 2 m/s hit from behind by a car at 10 m/s moves
+    # away from its rear contact (-2 m/s), the follower drives into it (+10 m/s); the
+    # ego at 10 m/s into a car at 3 m/s ahead approaches at 10 m/s, the car leaves at 3.
+    struck = _impact(KinematicState(0.0, 0.0, 0.0, 2.0), KinematicState(-6.0, 0.0, 0.0, 10.0))
+    strikes = _impact(KinematicState(0.0, 0.0, 0.0, 10.0), KinematicState(6.0, 0.0, 0.0, 3.0))
+    side = _impact(KinematicState(0.0, 0.0, 0.0, 0.0), KinematicState(0.0, 3.5, -math.pi / 2, 8.0))
+    others = _impact(KinematicState(0.0, 0.0, 0.0, 10.0), KinematicState(6.0, 0.0, 0.0, 3.0), ego_entity=2)
+    kerb = dataclasses.replace(strikes.measurement.b, entity=STATIC, type="kerb", velocity=(0.0, 0.0))
+    into_kerb = dataclasses.replace(strikes, measurement=dataclasses.replace(strikes.measurement, b=kerb))
+    assert struck.measurement.a.reduced_area == "rear"
+    assert side.measurement.a.reduced_area == "driver_side"  # a car from the left into a standing ego
+    expect = ExpectSpec(ego_collision=True, ego_strikes=False, max_ego_collisions=1)
+
+    def check(*collisions):
+        summary = _summary(collisions=collisions, ego_collided=any(c.involves_ego for c in collisions))
+        return {r.name: (r.passed, r.measured) for r in check_expectations(expect, summary)}
+
+    hit_only = check(struck, others)  # a third-party collision is not the ego's
+    assert hit_only == {"ego_collision": (True, "true"), "ego_strikes": (True, "false"),
+                        "max_ego_collisions": (True, "1")}  # fmt: skip
+    assert check(side)["ego_strikes"] == (True, "false")
+    assert check(strikes)["ego_strikes"] == (False, "true")
+    assert check(into_kerb)["ego_strikes"] == (False, "true")
+    # Hit, then pushed into the car ahead: a second impact, one the ego drives into.
+    assert check(struck, strikes) == {"ego_collision": (True, "true"), "ego_strikes": (False, "true"),
+                                      "max_ego_collisions": (False, "2")}  # fmt: skip
+    assert check()["ego_strikes"] == (True, "false")  # no contact: ego_collision = true fails instead
+    assert check()["ego_collision"] == (False, "false")
+
+
 def test_a_failed_run_fails_every_expectation_but_an_outcome_that_allows_it():
     failed = _summary(outcome="failed", harm={"vulnerable": 0.0})
     results = check_expectations(ExpectSpec(outcome=("failed",), max_vulnerable_harm=1.0), failed)
@@ -306,6 +348,8 @@ def test_verdict_and_record_round_trip():
         ({"outcome": 3}, "expect.outcome must be an outcome name or a list of them, got 3"),
         ({"ego_collision": "no"}, "expect.ego_collision must be true or false, got 'no'"),
         ({"max_collisions": 1.5}, "expect.max_collisions"),
+        ({"ego_strikes": 0}, "expect.ego_strikes must be true or false, got 0"),
+        ({"max_ego_collisions": -1}, "expect.max_ego_collisions must be an integer >= 0, got -1"),
         ({"max_vulnerable_harm": -0.1}, "expect.max_vulnerable_harm must lie in [0, 1000]"),
         ({"reach_gaol": True}, "unknown key 'expect.reach_gaol'; allowed: collision, ego_collision"),
     ],
