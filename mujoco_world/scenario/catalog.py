@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ethical_planner.road_users import DEFAULT_SHAPES, EGO_SHAPE, RoadUserType
 from mujoco_world.scenario.spec import (
     ActionSpec,
     BehaviourSpec,
@@ -930,6 +931,75 @@ def follower_brakes_weakly(rng: np.random.Generator | None = None) -> Scenario:
     )
 
 
+def rear_ended_at_red_light(rng: np.random.Generator | None = None) -> Scenario:
+    """The ego waits at a red light while people cross; a car behind brakes too late and hits it.
+
+    Control after contact (``ego.post_crash = "continue"``): the ego stands 1 m before
+    the stop line of a light that is red for 7 s, two adults and a child cross 2.5-3.5 m
+    beyond the line. A scripted car (blind to the ego) comes from 30 m behind at 9 m/s,
+    brakes at 4 m/s^2 too late and hits the ego's rear at about 3 m/s. The ego's sensor
+    looks ahead (``sensor.fov = 180``): it does not see the follower coming, so the
+    contact is not the planner's to avoid (with all-round sight all three planners flee
+    across the red line past the pedestrians; README). Measured is what comes after: the
+    controller is cut only during the impact, so the ego is not pushed into the people
+    crossing; under ``continue`` it drives on at green, under ``brake`` it stays at rest.
+
+    [expect] the ego is hit (``struck_from_behind``) and strikes nobody itself, no second
+    impact, no harm to the pedestrians, and under ``continue`` it gets 30 m past the line.
+    Measured, seed 0: ethical and selfish are hit at 3.353 s (dv 1.85 m/s), pushed 0.21 m,
+    stay before the line and drive on at green (112 m at 13.4 s); standard, crept to 0.5 m
+    before the line, is hit at 3.55 s and under ``continue`` carried over it (its plan
+    brakes gently), 0.89 m from a pedestrian; under ``brake`` all three stop before the
+    line and the run ends at rest (``min_progress`` fails: the policy is what it tests).
+    """
+    draw = _Draw(rng)
+    road = RoadSpec(length=160.0, speed_limit=13.9)
+    line_s = 60.0
+    red_end = draw(7.0, 6.0, 8.0)
+    line = StopLineSpec("light", s=line_s, red=((0.0, red_end),))
+    ego_s = line_s - 0.5 * EGO_SHAPE.length - 1.0  # its front 1 m before the line
+    cross_x = line_s + 2.5
+    kerb = road.half_width + road.shoulder + 1.0
+    walkers = (
+        ("pedestrian_a", "pedestrian", 0.0, -kerb, kerb + 5.0, draw(1.4, 1.2, 1.6)),
+        ("pedestrian_b", "pedestrian", 1.0, kerb, -kerb - 5.0, draw(1.3, 1.1, 1.5)),
+        ("child", "child", 0.5, -kerb - 1.5, kerb + 5.0, draw(1.2, 1.0, 1.4)),
+    )
+    legal = LegalSpec(speed_limit=2.5, lateral_half_width=0.5)
+    people = tuple(
+        _user(name, kind, RouteSpec(road="waypoints", waypoints=((cross_x + dx, y0), (cross_x + dx, y1))),
+              0.0, _scripted(speed), legal=legal)
+        for name, kind, dx, y0, y1, speed in walkers
+    )  # fmt: skip
+    # The follower's front is ``gap`` behind the ego's rear; it brakes at 4 m/s^2 from
+    # ``speed`` when the rest of the gap is just what it needs to slow to ``hit``.
+    speed, hit, centres = draw(9.0, 8.0, 11.0), draw(3.0, 2.0, 4.0), draw(30.0, 26.0, 36.0)
+    gap = centres - 0.5 * (EGO_SHAPE.length + DEFAULT_SHAPES[RoadUserType.CAR].length)
+    brake_at = (gap - (speed**2 - hit**2) / (2.0 * 4.0)) / speed
+    profile = ((0.0, speed), (brake_at, speed), (brake_at + (speed - hit) / 4.0, hit))
+    follower = _user(
+        "follower", "car", RouteSpec(lane=0), ego_s - centres, _scripted(speed, speed_profile=profile)
+    )
+    return Scenario(
+        name="rear_ended_at_red_light",
+        description="rear-ended lightly at a red light with people crossing ahead; it drives on at green",
+        road=road,
+        sensor=SensorSpec(fov=180.0),
+        ego=EgoSpec(s0=ego_s, speed=0.0, goal_s=line_s + 40.0, post_crash="continue"),
+        road_users=(follower, *people),
+        stop_lines=(line,),
+        duration=20.0,
+        expect=ExpectSpec(
+            ego_collision=True,
+            ego_strikes=False,
+            max_ego_collisions=1,
+            max_vulnerable_harm=0.0,
+            min_distance_vulnerable=0.5,
+            min_progress=line_s + 30.0,
+        ),
+    )
+
+
 @dataclass(frozen=True, slots=True)
 class ScenarioFamily:
     """A named scenario family.
@@ -967,6 +1037,7 @@ _FAMILIES = (
     no_overtaking_zone,
     stop_sign,
     follower_brakes_weakly,
+    rear_ended_at_red_light,
 )
 
 #: Name -> family, in catalog order.

@@ -11,7 +11,9 @@ import math
 import numpy as np
 import pytest
 
+from harm_calibration.study.attribution import attribute
 from mujoco_world.agents.ego_planner import Plan
+from mujoco_world.evaluation.compare import approach_speed, ego_strikes
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.metrics import Metric, default_metrics
 from mujoco_world.loop.runner import closed_loop, run_scenario
@@ -288,3 +290,132 @@ def test_scrape_wall_for_child_the_ethical_planner_passes_the_child_along_the_wa
     assert run.clearance_vulnerable["child"] > 0.15
     assert run.progress > 65.0  # past the child (at s = 63 m)
     assert run.verdict == "pass"  # [expect] max_vulnerable_harm = 0
+
+
+# ----------------------------------------------------------------- rear_ended_at_red_light
+
+
+def _spy(world):
+    """Record, per physics step, (time, ego in an impact, ego crashed, ego ctrl, ego qvel)."""
+    rows = []
+    scene = world.scene
+    physics_step = scene.step
+
+    def spy(observer=None):
+        rows.append(
+            (
+                world.time,
+                bool(world.recorder.in_impact[0]),
+                bool(world.crashed[0]),
+                scene.ctrl[0].copy(),
+                scene.qvel[0].copy(),
+            )
+        )
+        return physics_step(observer)
+
+    scene.step = spy
+    return rows
+
+
+@pytest.fixture(scope="module")
+def rear_ended():
+    """rear_ended_at_red_light (selfish, its first 4.2 s) under both policies.
+
+    Returns:
+        policy -> (summary, world, spied rows).
+    """
+    scenario = dataclasses.replace(get_scenario("rear_ended_at_red_light"), duration=4.2)
+    assert scenario.ego.post_crash is PostCrashPolicy.CONTINUE
+    out = {}
+    for policy in ("continue", "brake"):
+        loop = closed_loop(scenario, "selfish", config=RunConfig(post_crash=policy))
+        rows = _spy(loop.world)
+        out[policy] = (loop.execute(), loop.world, rows)
+    return out
+
+
+@pytest.mark.parametrize("policy", ["continue", "brake"])
+def test_rear_ended_at_red_light_the_follower_strikes_once_and_no_one_else_is_touched(rear_ended, policy):
+    summary, world, _ = rear_ended[policy]
+    assert summary.post_crash == policy
+    (hit,) = summary.ego_collisions  # no second impact: not pushed into the people crossing
+    assert summary.collisions == (hit,)
+    m = hit.measurement
+    assert m.b.entity == 1 and world.scene.names[1] == "follower"
+    assert m.a.reduced_area == "rear" and m.b.reduced_area == "front"
+    # The follower drives into the standing ego (its approach speed ~3 m/s, the ego's ~0):
+    # struck_from_behind, not the ego's own.
+    assert approach_speed(m.b, m.contact_position) == pytest.approx(3.0, abs=0.4)
+    assert abs(approach_speed(m.a, m.contact_position)) < 0.3
+    behaviours = {b.id: b.behaviour for b in summary.bodies}
+    assert attribute(hit, behaviours) == "struck_from_behind"
+    assert not ego_strikes(hit)
+    assert summary.harm["vulnerable"] == 0.0
+    assert min(summary.clearance_vulnerable.values()) > 2.0
+
+
+@pytest.mark.parametrize("policy", ["continue", "brake"])
+def test_rear_ended_at_red_light_the_measured_delta_v_excludes_the_controller(rear_ended, policy):
+    summary, world, rows = rear_ended[policy]
+    (hit,) = summary.ego_collisions
+    impact = [r for r in rows if r[1]]
+    assert len(impact) >= 3 and all(np.all(r[3] == 0.0) for r in impact)  # no controller force inside
+    # The first impulse's J1 / m against the ego's centre-of-mass velocity change from
+    # before the contact to the end of the impact: equal within the one physics step in
+    # which the controller acts before the contact is known (mu g dt), so no controller
+    # force is in the measured delta-v.
+    start = next(i for i, r in enumerate(rows) if r[2])
+    end = next(i for i in range(start, len(rows)) if not rows[i][1])
+    dv_com = np.linalg.norm(rows[end][4][:2] - rows[start - 2][4][:2])
+    mu_g_dt = world.control.friction_mu * GRAVITY * world.scene.dt
+    assert hit.measurement.a.dv_first == pytest.approx(dv_com, abs=mu_g_dt)
+    # One impulse J1 on both: m_ego dv_ego = m_car dv_car.
+    m_ego, m_car = world.scene.masses[0], world.scene.masses[1]
+    assert hit.measurement.a.dv_first * m_ego == pytest.approx(hit.measurement.b.dv_first * m_car, rel=1e-6)
+
+
+def test_rear_ended_at_red_light_only_continue_keeps_the_ego_on_its_plans(rear_ended):
+    cont, world_c, rows_c = rear_ended["continue"]
+    brake, world_b, rows_b = rear_ended["brake"]
+    crash = cont.ego_collisions[0].measurement.time
+    assert brake.ego_collisions[0].measurement.time == pytest.approx(crash)  # the same contact
+    assert world_c.ego_on_plan and not world_b.ego_on_plan
+    # After the impact, under brake: -m decel v / |v| (brakes at up to mu g); under
+    # continue the tracking force towards the plan (the ego standing at the red line: it
+    # holds it there, it does not brake along its velocity).
+    mass, mu_g, tau = (
+        world_b.scene.masses[0],
+        world_b.control.friction_mu * GRAVITY,
+        world_b.control.brake_time_constant,
+    )
+    after_b = [r for r in rows_b if r[2] and not r[1]]
+    assert len(after_b) > 500
+    for _, _, _, ctrl, qvel in after_b:
+        speed = math.hypot(qvel[0], qvel[1])
+        np.testing.assert_allclose(
+            ctrl[:2], -mass * min(mu_g, speed / tau) * qvel[:2] / max(speed, 1e-9), atol=1e-6
+        )
+    assert world_b.scene.speeds()[0] < 0.1  # at rest 0.85 s after the impact
+    # Pushed at about 1.8 m/s, the ego stops before the line (its front was 1 m before
+    # it) under either policy: no red-light crossing, the people crossing untouched.
+    line = get_scenario("rear_ended_at_red_light").stop_lines[0].s
+    for world, run in ((world_c, cont), (world_b, brake)):
+        front = world.positions[0][0] + 0.5 * world.scene.bodies[0].length  # the road runs along +x from 0
+        assert front < line and run.rule_violations == ()
+
+
+@pytest.mark.slow
+def test_rear_ended_at_red_light_continue_drives_on_at_green_and_brake_stays():
+    # The whole catalog scenario with the ethical planner (about 1 min per policy).
+    scenario = get_scenario("rear_ended_at_red_light")
+    runs = {
+        p: run_scenario(scenario, "ethical", config=RunConfig(post_crash=p)) for p in ("continue", "brake")
+    }
+    cont, brake = runs["continue"], runs["brake"]
+    assert cont.verdict == "pass"
+    assert cont.outcome == "crash" and "10.0 s after it" in cont.reason  # PostCrashTime, not at rest
+    line = scenario.stop_lines[0].s
+    assert cont.progress > line + 30.0
+    assert brake.outcome == "crash" and "come to rest" in brake.reason
+    assert brake.progress < line
+    assert [r.name for r in brake.expectations if not r.passed] == ["min_progress"]
