@@ -233,6 +233,36 @@ MUTANTS = (
             ),
         )
     ),
+    # --- control after contact (issue 15): the [expect] items of a struck ego, the rest
+    # rule under continue, the controller cut inside an impact
+    Mutant(
+        "ego_strikes_flipped",
+        "mujoco_world/evaluation/compare.py",
+        "return approach_speed(ego, m.contact_position) >= approach_speed(other, m.contact_position)",
+        "return approach_speed(ego, m.contact_position) < approach_speed(other, m.contact_position)",
+        ("tests/mujoco_world/scenario/test_language.py",),
+    ),
+    Mutant(
+        "max_ego_collisions_counts_all",
+        "mujoco_world/loop/expectations.py",
+        "lambda s: len(s.ego_collisions), ",
+        "lambda s: len(s.collisions), ",
+        ("tests/mujoco_world/scenario/test_language.py",),
+    ),
+    Mutant(
+        "crash_at_rest_ignores_continue",
+        "mujoco_world/loop/rules.py",
+        "if run.crash_time is None or (world.crashed[0] and world.ego_on_plan):",
+        "if run.crash_time is None:",
+        ("tests/mujoco_world/loop/test_rules_and_metrics.py",),
+    ),
+    Mutant(
+        "controller_on_inside_impacts",
+        "mujoco_world/loop/world.py",
+        "ctrl[self.recorder.in_impact] = 0.0",
+        "pass",
+        ("tests/mujoco_world/loop/test_post_crash.py",),
+    ),
 )
 
 
