@@ -131,7 +131,10 @@ def ego_strikes(impact: ImpactRecord) -> bool:
     ego's approach speed to the contact point (``approach_speed``) is at least the
     other road user's: a leader hit from behind moves away from its rear contact, a
     car that drifts into the ego's side approaches it faster than the ego does.
-    False for a collision without the ego.
+    False for a collision without the ego. Speeds are taken in the world frame, so
+    between two moving cars the one whose contact point lies ahead of it counts:
+    a car cutting in so close that the ego's front meets its rear side (both at
+    10 m/s, it 2 m ahead, turning in at 0.25 rad) counts as the ego's strike.
     """
     if not impact.involves_ego:
         return False

@@ -316,6 +316,12 @@ def test_ego_strikes_and_max_ego_collisions_tell_a_struck_ego_from_one_that_stri
     assert check(side)["ego_strikes"] == (True, "false")
     assert check(strikes)["ego_strikes"] == (False, "true")
     assert check(into_kerb)["ego_strikes"] == (False, "true")
+    # World-frame approach speeds (documented limit): a car 2 m ahead turning in at
+    # 0.25 rad, both at about 10 m/s, meets the ego's front with its rear side; the ego's
+    # approach (9.3 m/s) beats the cutter's (5.0 m/s), so it counts as the ego's strike.
+    cut_in = _impact(KinematicState(0.0, 0.0, 0.0, 10.0), KinematicState(2.0, 3.0, -0.25, 10.3))
+    assert cut_in.measurement.b.reduced_area == "right_side"
+    assert check(cut_in)["ego_strikes"] == (False, "true")
     # Hit, then pushed into the car ahead: a second impact, one the ego drives into.
     assert check(struck, strikes) == {"ego_collision": (True, "true"), "ego_strikes": (False, "true"),
                                       "max_ego_collisions": (False, "2")}  # fmt: skip
