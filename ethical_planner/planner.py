@@ -17,7 +17,7 @@ import numpy as np
 
 from ethical_planner.boundary import edge_impact_speed, physical_view
 from ethical_planner.collision_probability import collides
-from ethical_planner.config import PlannerConfig
+from ethical_planner.config import CommitmentConfig, PlannerConfig
 from ethical_planner.cost import (
     CostBreakdown,
     comfort_and_mobility,
@@ -415,6 +415,8 @@ class Planner:
         self.workers = Workers() if workers is None else workers
         keep_freed_memory()  # cycles reuse freed arrays instead of faulting fresh pages in
         self._previous: PreviousPlan | None = None
+        #: Consecutive cycles on which the kept previous plan cost more than the cheapest.
+        self._outvoted = 0
         self._stood = np.zeros(len(environment.stop_lines), dtype=bool)
         self.desired_speed = (
             config.desired_speed if config.desired_speed is not None else environment.speed_limit
@@ -840,6 +842,7 @@ class Planner:
             brake = emergency_braking(start, path, candidates.t, config.vehicle)
             chosen = self._evaluate(brake, prediction, corridors, timings, lines, lane_rules)
             index, emergency, continued = 0, True, False
+            self._outvoted = 0
             reason = (
                 "emergency braking: every sampled candidate breaks a physical limit ("
                 + ", ".join(f"{k} {int(v.sum())}" for k, v in grid.invalid.items())
@@ -859,14 +862,16 @@ class Planner:
     def reset(self) -> None:
         """Forget the previous plan and the stop signs stood at (a new run, or the ego was moved)."""
         self._previous = None
+        self._outvoted = 0
         self._stood[:] = False
 
     def _choose(self, grid: _Evaluation, best_level: int) -> tuple[int, str, bool]:
         """Cheapest candidate of the highest level, unless the previous plan is as good.
 
         Comfort and mobility break ties. The continuation of the previous plan is kept
-        if it is on the same level and within the commitment margin of the cheapest
-        (``CommitmentConfig``).
+        if it is on the same level and within the commitment margin of the cheapest,
+        unless it has cost more than the cheapest on ``switch_after_cycles``
+        consecutive cycles (``CommitmentConfig``, ``keep_previous_plan``).
 
         Returns:
             (index, reason, whether the continuation was kept).
@@ -897,17 +902,26 @@ class Planner:
             )
         commitment = self.config.commitment
         kept = np.flatnonzero((kind == CandidateKind.CONTINUATION) & (grid.levels == best_level))
+        outvoted = self._outvoted
+        self._outvoted = 0
         if commitment.enabled and kept.size and int(kept[0]) != index:
             j_best, j_kept = float(costs.total[index]), float(costs.total[kept[0]])
-            margin = commitment.relative_margin * abs(j_best)
-            if best_level == Validity.VALID:
-                margin += commitment.absolute_margin
-            if j_kept <= j_best + margin:
+            keep, self._outvoted = keep_previous_plan(
+                j_best, j_kept, best_level == Validity.VALID, outvoted, commitment
+            )
+            margin = commitment_margin(j_best, best_level == Validity.VALID, commitment)
+            if keep:
                 reason += (
                     f"; kept the previous plan: its cost {j_kept:.4g} is within the commitment "
                     f"margin {margin:.3g} of the cheapest ({j_best:.4g}, {equation})"
                 )
                 return int(kept[0]), reason, True
+            if j_kept <= j_best + margin:
+                reason += (
+                    f"; dropped the previous plan (cost {j_kept:.4g}, within the commitment margin "
+                    f"{margin:.3g}): it cost more than the cheapest on {outvoted + 1} consecutive "
+                    "cycles (commitment.switch_after_cycles)"
+                )
         return index, reason, bool(kind[index] == CandidateKind.CONTINUATION)
 
     def _refused(self, grid: _Evaluation, index: int) -> np.ndarray:
@@ -1038,6 +1052,55 @@ class Planner:
             candidate_levels=grid.levels,
             prediction=prediction,
         )
+
+
+def commitment_margin(j_best: float, valid_level: bool, commitment: CommitmentConfig) -> float:
+    """How much more than the cheapest candidate the previous plan may cost and be kept.
+
+    ``relative_margin`` |J_best|, plus ``absolute_margin`` on the valid level (Eq. 5's
+    comfort and mobility set its scale; Eq. 6's risk costs have none).
+
+    Args:
+        j_best: the cheapest candidate's cost of its level (Eq. 5 or Eq. 6).
+        valid_level: the level is ``Validity.VALID``.
+        commitment: the margins.
+    """
+    margin = commitment.relative_margin * abs(j_best)
+    return margin + commitment.absolute_margin if valid_level else margin
+
+
+def keep_previous_plan(
+    j_best: float, j_kept: float, valid_level: bool, outvoted: int, commitment: CommitmentConfig
+) -> tuple[bool, int]:
+    """Whether the continuation of the previous plan is kept over the cheapest candidate.
+
+    Hysteresis with persistence (``CommitmentConfig``): the continuation, on the same
+    level as the cheapest candidate, is kept while it costs at most ``commitment_margin``
+    more; but if it has cost more than the cheapest on the ``outvoted`` cycles before
+    this one and does again, and that makes ``switch_after_cycles`` consecutive cycles,
+    the cheapest is taken. A continuation that costs no more than the cheapest (a tie)
+    is kept and is not outvoted.
+
+    Args:
+        j_best: the cheapest candidate's cost (Eq. 5 on the valid level, else Eq. 6).
+        j_kept: the continuation's cost, of the same level.
+        valid_level: the level is ``Validity.VALID``.
+        outvoted: consecutive cycles before this one on which the previous plan was kept
+            at a cost above the cheapest.
+        commitment: margins and ``switch_after_cycles``.
+
+    Returns:
+        (keep it, the count of consecutive outvoted cycles to carry to the next cycle:
+        0 unless it is kept at a cost above the cheapest).
+    """
+    if j_kept <= j_best:
+        return True, 0
+    if j_kept > j_best + commitment_margin(j_best, valid_level, commitment):
+        return False, 0
+    outvoted += 1
+    if commitment.switch_after_cycles and outvoted >= commitment.switch_after_cycles:
+        return False, 0
+    return True, outvoted
 
 
 def _best_by_level(grid: _Evaluation) -> dict[int, LevelBest]:

@@ -57,6 +57,8 @@ def test_toml_overrides_apply(tmp_path):
         ({"sampling": {"brake_lateral_fractions": [0.0]}}, "brake_lateral_fractions"),
         ({"sampling": {"brake_decelerations": [-2.0]}}, "brake_decelerations"),
         ({"commitment": {"relative_margin": -0.1}}, "commitment.relative_margin"),
+        ({"commitment": {"switch_after_cycles": -1}}, "commitment.switch_after_cycles"),
+        ({"commitment": {"switch_after_cycles": 2.5}}, "commitment.switch_after_cycles"),
         ({"weights": {"path_reference": "kerb"}}, "weights.path_reference"),
         ({"prediction": {"turn_rate_time_constant": 0.0}}, "turn_rate_time_constant"),
     ],
