@@ -902,14 +902,13 @@ class Planner:
             )
         commitment = self.config.commitment
         kept = np.flatnonzero((kind == CandidateKind.CONTINUATION) & (grid.levels == best_level))
+        j_best = float(costs.total[index])
+        j_kept = float(costs.total[kept[0]]) if commitment.enabled and kept.size else None
+        valid = best_level == Validity.VALID
         outvoted = self._outvoted
-        self._outvoted = 0
-        if commitment.enabled and kept.size and int(kept[0]) != index:
-            j_best, j_kept = float(costs.total[index]), float(costs.total[kept[0]])
-            keep, self._outvoted = keep_previous_plan(
-                j_best, j_kept, best_level == Validity.VALID, outvoted, commitment
-            )
-            margin = commitment_margin(j_best, best_level == Validity.VALID, commitment)
+        keep, self._outvoted = keep_previous_plan(j_best, j_kept, valid, outvoted, commitment)
+        if j_kept is not None and int(kept[0]) != index:
+            margin = commitment_margin(j_best, valid, commitment)
             if keep:
                 reason += (
                     f"; kept the previous plan: its cost {j_kept:.4g} is within the commitment "
@@ -1070,7 +1069,11 @@ def commitment_margin(j_best: float, valid_level: bool, commitment: CommitmentCo
 
 
 def keep_previous_plan(
-    j_best: float, j_kept: float, valid_level: bool, outvoted: int, commitment: CommitmentConfig
+    j_best: float,
+    j_kept: float | None,
+    valid_level: bool,
+    outvoted: int,
+    commitment: CommitmentConfig,
 ) -> tuple[bool, int]:
     """Whether the continuation of the previous plan is kept over the cheapest candidate.
 
@@ -1078,12 +1081,13 @@ def keep_previous_plan(
     level as the cheapest candidate, is kept while it costs at most ``commitment_margin``
     more; but if it has cost more than the cheapest on the ``outvoted`` cycles before
     this one and does again, and that makes ``switch_after_cycles`` consecutive cycles,
-    the cheapest is taken. A continuation that costs no more than the cheapest (a tie)
-    is kept and is not outvoted.
+    the cheapest is taken. A continuation that costs no more than the cheapest (it is
+    the cheapest, or ties with it) is kept and is not outvoted.
 
     Args:
         j_best: the cheapest candidate's cost (Eq. 5 on the valid level, else Eq. 6).
-        j_kept: the continuation's cost, of the same level.
+        j_kept: the continuation's cost, of the same level; None if there is none on
+            that level (or the commitment is off): nothing to keep, the count restarts.
         valid_level: the level is ``Validity.VALID``.
         outvoted: consecutive cycles before this one on which the previous plan was kept
             at a cost above the cheapest.
@@ -1093,6 +1097,8 @@ def keep_previous_plan(
         (keep it, the count of consecutive outvoted cycles to carry to the next cycle:
         0 unless it is kept at a cost above the cheapest).
     """
+    if j_kept is None:
+        return False, 0
     if j_kept <= j_best:
         return True, 0
     if j_kept > j_best + commitment_margin(j_best, valid_level, commitment):

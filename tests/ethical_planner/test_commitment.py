@@ -66,6 +66,9 @@ def test_the_count_restarts_when_the_previous_plan_is_cheapest_or_dropped():
     assert _script([above] * 2 + [tie] + [above] * 2, rule) == "KKKKK"
     # Dropped beyond the margin: the count restarts for the next plan.
     assert _script([above, above, beyond, above, above, above], rule) == "KKSKKS"
+    # No continuation on the cycle's level (or the commitment off): nothing kept, restart.
+    none = (10.0, None)
+    assert _script([above, above, none, above, above, above], rule) == "KKSKKS"
 
 
 def test_switch_after_one_cycle_is_the_cheapest_plan_every_cycle():
