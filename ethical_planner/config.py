@@ -506,7 +506,7 @@ class CommitmentConfig:
     consecutive cycles is not kept on noise: on that cycle the cheapest is taken
     (``keep_previous_plan``). In curve_truck (seed 0) the ego crawled behind a walker
     at 1.5 m/s for 15 s although from 9.2 s a pass through the free oncoming lane was
-    the cheapest plan on every cycle for 1.4 s, 0.4-1.2 below the crawl (2-4 %, margin
+    the cheapest plan on every cycle for 1.4 s, 0.2-1.2 below the crawl (1-4 %, margin
     2.0): within a 3 s horizon from 2 m/s the pass's speed gain (mean deficit 11.2
     instead of 14.9 m/s, 7.4 cost units) barely exceeds its lane change and lateral
     jerk (6.5). A cheaper plan must win again on every one of those cycles, so
