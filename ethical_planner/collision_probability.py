@@ -440,6 +440,7 @@ def risk_maximum(
     epsilon: float,
     onset: bool = False,
     workers: Workers | None = None,
+    cap: int = 0,
 ) -> RiskMaximum:
     """Eq. 3 and maximin's harms of every (candidate, road user) pair, integrals only where they matter.
 
@@ -463,10 +464,16 @@ def risk_maximum(
         onset: also find each pair's highest p and the step where p first reaches half
             of it (the responsibility's collision geometry), exactly.
         workers: threads for large inputs.
+        cap: if > 0, at most this many integrals per pair, in the visiting order (highest
+            bound x harm first): the results are then lower bounds of the exact ones
+            (R and maximin's harms are maxima over the steps evaluated, a subset), each
+            p computed as the full evaluation computes it. Not with ``onset``.
 
     Returns:
         The results per pair; pairs without gated triples have 0 everywhere.
     """
+    if cap and onset:
+        raise ValueError("risk_maximum: cap (lower bounds) cannot find the onset exactly; use cap=0")
     rows = np.ascontiguousarray(rows, dtype=np.int64)
     m, n_obs, n_t = rows.size, tables.n_obs, tables.n_t
     out = np.zeros((5, m, n_obs))
@@ -484,7 +491,7 @@ def risk_maximum(
     inputs = (tables.obs_rows, tables.ego_rows, tables.weights, n_obs, n_t, rows, flat, harm_obs, harm_ego)
 
     def run(job: int) -> None:
-        settings = (epsilon, onset, tables.degenerate, tables.far)
+        settings = (epsilon, onset, tables.degenerate, tables.far, cap)
         _risk_maximum(*inputs, cuts[job], cuts[job + 1], *settings, out, onset_step, counts[job])
 
     workers.parallel_for(list(range(len(cuts) - 1)), run)
@@ -1063,6 +1070,7 @@ def _risk_maximum(
     onset: bool,
     degenerate: bool,
     far: float,
+    cap: int,
     out: np.ndarray,
     onset_step: np.ndarray,
     counts: np.ndarray,
@@ -1087,6 +1095,7 @@ def _risk_maximum(
         epsilon: maximin's collision-probability threshold.
         onset: also find the highest p and its onset step exactly.
         degenerate, far: see ``OctagonTables``.
+        cap: at most this many integrals per pair if > 0 (lower bounds, see ``risk_maximum``).
         out: shape (5, m, n_obs), written for the pairs processed (others untouched):
             R_obs, R_ego, maximin harm of the road user and of the ego (0 without a
             step above epsilon), highest p (with ``onset``; else of the evaluated steps).
@@ -1138,6 +1147,7 @@ def _risk_maximum(
             onset,
             degenerate,
             far,
+            cap if cap > 0 else -1,
             bound,
             order,
             probability,
@@ -1203,6 +1213,33 @@ def _visiting_order(
 
 
 @kernel
+def _mixture_mass(
+    obs_rows: np.ndarray,
+    ego_rows: np.ndarray,
+    weights: np.ndarray,
+    n_t: int,
+    obs: int,
+    step: int,
+    e: int,
+    far: float,
+    edges: np.ndarray,
+) -> float:
+    """The collision probability of one triple from its components' edge tables (``_pair_maximum``).
+
+    sum_c w_c p_c over the components within the gate, clipped to [0, 1] for a mixture.
+    """
+    n_components = weights.shape[1]
+    p = 0.0
+    for c in range(n_components):
+        o = (obs * n_components + c) * n_t + step
+        if n_components == 1 or _in_gate(obs_rows, o, ego_rows, e):
+            p += weights[obs * n_t + step, c] * _octagon_mass(edges[c], far)
+    if n_components > 1:
+        p = min(max(p, 0.0), 1.0)
+    return p
+
+
+@kernel
 def _pair_maximum(
     obs_rows: np.ndarray,
     ego_rows: np.ndarray,
@@ -1219,6 +1256,7 @@ def _pair_maximum(
     onset: bool,
     degenerate: bool,
     far: float,
+    cap: int,
     bound: np.ndarray,
     order: np.ndarray,
     probability: np.ndarray,
@@ -1232,7 +1270,8 @@ def _pair_maximum(
     number of integrals evaluated. A mixture's p is sum_c w_c p_c over the components
     within the gate (the others' p is 0), clipped to [0, 1] as in
     ``ethical_planner.risk.prediction_collision_probability``; ``edges`` holds one
-    table per component, shape (K, 6, 8).
+    table per component, shape (K, 6, 8). It stops after ``cap`` integrals (the outputs
+    are then maxima over a subset of the steps: lower bounds); -1 evaluates all needed.
     """
     n_components = weights.shape[1]
     risk_obs = risk_ego = 0.0
@@ -1242,6 +1281,8 @@ def _pair_maximum(
     for j in range(stop - start):
         probability[j] = -1.0
     for rank in range(stop - start):
+        if integrals == cap:
+            break
         j = order[rank]
         h_obs, h_ego = harm_obs[start + j], harm_ego[start + j]
         upper = bound[j]
@@ -1264,13 +1305,7 @@ def _pair_maximum(
                         total += weights[obs * n_t + step, c] * (_rectangle_bound(edges[c]) + _BOUND_SLACK)
                 upper = min(upper, total)
                 continue
-            p = 0.0
-            for c in range(n_components):
-                o = (obs * n_components + c) * n_t + step
-                if n_components == 1 or _in_gate(obs_rows, o, ego_rows, e):
-                    p += weights[obs * n_t + step, c] * _octagon_mass(edges[c], far)
-            if n_components > 1:
-                p = min(max(p, 0.0), 1.0)
+            p = _mixture_mass(obs_rows, ego_rows, weights, n_t, obs, step, e, far, edges)
             integrals += 1
             probability[j] = p
             risk_obs = max(risk_obs, p * h_obs)

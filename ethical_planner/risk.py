@@ -374,6 +374,8 @@ def assess_risk(
     onset: bool = False,
     workers: Workers | None = None,
     impact_speed: np.ndarray | None = None,
+    cap: int = 0,
+    triples: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> RiskAssessment:
     """Risk of candidates ``rows`` for every road user (Eqs. 3, 4) and maximin's harms.
 
@@ -397,14 +399,21 @@ def assess_risk(
         impact_speed: each candidate's speed into the road edge where it leaves the
             road [m/s], shape (m,) (``boundary.edge_impact_speed``); None: its speed
             at the first step off the road (the paper's head-on wall).
+        cap: if > 0, at most this many integrals per (candidate, road user) pair
+            (``collision_probability.risk_maximum``): R_k, R_ego,k, maximin's harms and R_ego
+            are then lower bounds of the exact ones (the boundary risk stays exact).
+        triples: the gated triples of ``rows`` and their harms, (flat, harm_obs,
+            harm_ego) as ``gate`` and ``_triple_harms`` give them, if already known
+            (``gated_triples``).
     """
     workers = Workers() if workers is None else workers
     rows = np.asarray(rows, dtype=np.int64)
-    flat = gate(tables, table_rows)
-    harm_obs, harm_ego = _triple_harms(
-        candidates, rows, prediction, ego_mass, ego_shape, config, flat, workers
-    )
-    maximum = risk_maximum(tables, table_rows, flat, harm_obs, harm_ego, epsilon, onset, workers)
+    if triples is None:
+        triples = gated_triples(
+            candidates, rows, tables, table_rows, prediction, ego_shape, ego_mass, config, workers
+        )
+    flat, harm_obs, harm_ego = triples
+    maximum = risk_maximum(tables, table_rows, flat, harm_obs, harm_ego, epsilon, onset, workers, cap)
     m = rows.size
     boundary = np.zeros(m)
     leaves = outside.any(axis=1)
@@ -427,6 +436,56 @@ def assess_risk(
         triples=maximum.triples,
         integrals=maximum.integrals,
     )
+
+
+def gated_triples(
+    candidates: Candidates,
+    rows: np.ndarray,
+    tables: OctagonTables,
+    table_rows: np.ndarray,
+    prediction: Prediction,
+    ego_shape: Shape,
+    ego_mass: float,
+    config: RiskConfig,
+    workers: Workers | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The triples of candidates ``rows`` that pass the gate and their harms (``assess_risk``).
+
+    Returns:
+        (flat, harm_obs, harm_ego): flat indices (i * k + obs) * n_t + step, i the
+        position in ``rows``, ascending; the road user's and the ego's harm of each.
+    """
+    workers = Workers() if workers is None else workers
+    rows = np.asarray(rows, dtype=np.int64)
+    flat = gate(tables, table_rows)
+    harm_obs, harm_ego = _triple_harms(
+        candidates, rows, prediction, ego_mass, ego_shape, config, flat, workers
+    )
+    return flat, harm_obs, harm_ego
+
+
+def subset_triples(
+    triples: tuple[np.ndarray, np.ndarray, np.ndarray], positions: np.ndarray, m: int, per_row: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ``gated_triples`` of some of the m rows they were found for, renumbered.
+
+    Args:
+        triples: (flat, harm_obs, harm_ego) of m rows.
+        positions: the rows kept, ascending positions in 0..m-1, shape (q,).
+        m: rows of ``triples``.
+        per_row: k * n_t, the flat indices per row.
+
+    Returns:
+        (flat, harm_obs, harm_ego) as ``gated_triples`` of the rows kept would give them.
+    """
+    flat, harm_obs, harm_ego = triples
+    row = flat // per_row
+    kept = np.zeros(m, dtype=bool)
+    kept[positions] = True
+    renumber = np.full(m, -1, dtype=np.int64)
+    renumber[positions] = np.arange(positions.size)
+    keep = kept[row]
+    return renumber[row[keep]] * per_row + flat[keep] % per_row, harm_obs[keep], harm_ego[keep]
 
 
 def risk_detail(

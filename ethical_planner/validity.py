@@ -39,7 +39,9 @@ class Validity(IntEnum):
 #: Not a validity level: the mark of a candidate whose risk the planner did not evaluate,
 #: because its Eq. 5 cost cannot be below the chosen plan's even at zero risk
 #: (``Planner._branch_and_bound``). Its level is valid, above R_max or breaks a traffic
-#: rule; which is unknown.
+#: rule; which is unknown. At a fallback level (``Planner._fallback_branch_and_bound``):
+#: a candidate at that level whose Eq. 6 cost is bounded from below above the chosen
+#: plan's; its risk is unknown, never 0.
 UNASSESSED = -1
 
 #: Reasons of validity level 0, in the order of ``physically_invalid``.

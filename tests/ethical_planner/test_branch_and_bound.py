@@ -1,8 +1,9 @@
 """The planner's branch and bound over candidates chooses what evaluating every candidate chooses.
 
-Reference: the same planner with ``Planner._branch_and_bound`` replaced by the full
-evaluation of every candidate it is given (what the planner did before). Chosen index,
-level, every cost term, the reason and the R_max refusals must be equal to the bit.
+Reference: the same planner with ``Planner._branch_and_bound`` and
+``Planner._fallback_branch_and_bound`` replaced by the full evaluation of every candidate
+they are given (what the planner did before). Chosen index, level, every cost term, the
+reason and the R_max refusals must be equal to the bit.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 
 from benchmarks.planning_cycle import bench_scene, grid_config
+from ethical_planner import planner as planner_module
 from ethical_planner.config import preset
 from ethical_planner.environment import RoadEnvironment
 from ethical_planner.planner import Planner
@@ -42,6 +44,11 @@ def _street(seed: int):
 
 def _full(self, candidates, assessed, free, evaluate):
     """Every candidate assessed (the reference)."""
+    return evaluate(assessed)
+
+
+def _full_fallback(self, candidates, assessed, lower_bound, evaluate):
+    """Every candidate of the fallback level assessed (the reference)."""
     return evaluate(assessed)
 
 
@@ -76,9 +83,11 @@ def _assert_same(fast, full):
     levels, reference = np.asarray(fast.candidate_levels), np.asarray(full.candidate_levels)
     left_out = levels == UNASSESSED
     np.testing.assert_array_equal(levels[~left_out], reference[~left_out])
-    assert np.isin(
-        reference[left_out], [Validity.VALID, Validity.ABOVE_MAX_RISK, Validity.BREAKS_TRAFFIC_RULE]
-    ).all()
+    allowed = [Validity.VALID, Validity.ABOVE_MAX_RISK, Validity.BREAKS_TRAFFIC_RULE]
+    if full.level in (Validity.COLLISION, Validity.LEAVES_ROAD):
+        allowed = [full.level]  # left out by the fallback's branch and bound: at the chosen level
+    assert np.isin(reference[left_out], allowed).all()
+    assert fast.terminal_unsafe == full.terminal_unsafe
     assert fast.level_counts.get(UNASSESSED, 0) == int(left_out.sum())
     assert sum(fast.level_counts.values()) == levels.size
     return int(left_out.sum())
@@ -88,6 +97,7 @@ def _compare(config, env, ego, users, monkeypatch, cycles=1):
     fast = _decide(config, env, ego, users, cycles)
     with monkeypatch.context() as patch:
         patch.setattr(Planner, "_branch_and_bound", _full)
+        patch.setattr(Planner, "_fallback_branch_and_bound", _full_fallback)
         full = _decide(config, env, ego, users, cycles)
     return sum(_assert_same(a, b) for a, b in zip(fast, full, strict=True))
 
@@ -182,3 +192,103 @@ def test_a_negative_cost_term_makes_the_branch_and_bound_evaluate_every_candidat
     assert _compare(config, env, ego, users, monkeypatch) > 0  # without the rebate, some are left out
     monkeypatch.setattr(planner_module, "total_cost", with_rebate)
     assert _compare(config, env, ego, users, monkeypatch) == 0
+
+
+@pytest.mark.parametrize("preset_name", PRESETS)
+@pytest.mark.parametrize("grid", ["225", "default"])
+def test_fallback_level_chooses_as_full_evaluation(preset_name, grid, monkeypatch):
+    """20 road users: every candidate meets a predicted mean occupancy (level 1, Eq. 6)."""
+    monkeypatch.setattr(planner_module, "_FALLBACK_MIN", 0)  # the 225 grid's 189 candidates too
+    scene = bench_scene(20)
+    config = grid_config(grid, preset(preset_name))
+    left_out = _compare(config, scene.environment, scene.ego, scene.road_users, monkeypatch)
+    decision = Planner(config, scene.environment).plan(scene.ego, scene.road_users)
+    assert decision.level == Validity.COLLISION
+    if planner_module._risk_bounded(config.weights):
+        assert left_out > 0  # the lower bounds did leave candidates out
+        assert "not risk-assessed" in decision.summary()
+    else:
+        assert left_out == 0  # no risk weight the bound can use (standard), or J_R (responsible)
+
+
+def test_fallback_on_other_crowded_scenes_chooses_as_full_evaluation(monkeypatch):
+    """Other draws of the bench scene (seeds 6 and 7: level 1 with 20 road users), two cycles each."""
+    monkeypatch.setattr(planner_module, "_FALLBACK_MIN", 0)
+    left_out = 0
+    for seed in (6, 7):
+        scene = bench_scene(20, seed=seed)
+        for name in ("ethical", "selfish", "reference"):
+            config = preset(name).with_overrides({"sampling": {"horizons": [2.0, 3.0]}})
+            left_out += _compare(
+                config, scene.environment, scene.ego, scene.road_users, monkeypatch, cycles=2
+            )
+    assert left_out > 0
+
+
+def _fallback_spy(monkeypatch, check):
+    """Run ``check(bounds, exact totals, candidates, assessed)`` in every fallback branch and bound."""
+    original = Planner._fallback_branch_and_bound
+
+    def spy(self, candidates, assessed, lower_bound, evaluate):
+        exact = evaluate(assessed).costs.total
+        check(lower_bound(assessed), exact, candidates, assessed)
+        return original(self, candidates, assessed, lower_bound, evaluate)
+
+    monkeypatch.setattr(Planner, "_fallback_branch_and_bound", spy)
+
+
+def test_fallback_lower_bounds_never_exceed_the_eq6_cost(monkeypatch):
+    """The bound of every candidate against its exact Eq. 6 cost, bench scenes and crowded streets."""
+    monkeypatch.setattr(planner_module, "_FALLBACK_MIN", 0)
+    seen = []
+
+    def check(bound, exact, candidates, assessed):
+        assert np.all(bound <= exact)
+        seen.append(float(np.mean(bound > 0.0)))
+
+    _fallback_spy(monkeypatch, check)
+    scenes = [bench_scene(20)]
+    for seed in range(4):
+        env, ego, users = _street(seed)
+        crowd = users + tuple(
+            RoadUser(
+                10 + i, u.type, KinematicState(u.state.x + 6.0, u.state.y, u.state.yaw, u.state.v), u.shape
+            )
+            for i, u in enumerate(users)
+        )
+        scenes.append(type(scenes[0])(env, ego, crowd))
+    for scene in scenes:
+        for name in ("ethical", "selfish", "reference"):
+            Planner(grid_config("225", preset(name)), scene.environment).plan(scene.ego, scene.road_users)
+    assert seen and max(seen) > 0.5  # the bounds are not all 0
+
+
+def test_fallback_with_the_exact_cost_as_its_bound_still_evaluates_every_hard_stop(monkeypatch):
+    """The tightest valid bound leaves out all but the cheapest, yet every braking candidate is
+    evaluated (the reason names the best hard stop and its J_risk) and the choice is unchanged."""
+    from ethical_planner.sampling import CandidateKind
+
+    monkeypatch.setattr(planner_module, "_FALLBACK_MIN", 0)
+    original = Planner._fallback_branch_and_bound
+    evaluated = []
+
+    def tight(self, candidates, assessed, lower_bound, evaluate):
+        exact = evaluate(assessed).costs.total
+        part = original(
+            self, candidates, assessed, lambda rows: exact[np.searchsorted(assessed, rows)], evaluate
+        )
+        brakes = assessed[candidates.kind[assessed] == CandidateKind.BRAKE]
+        evaluated.append((brakes, part.risk.rows))
+        return part
+
+    scene = bench_scene(20)
+    config = grid_config("default")
+    with monkeypatch.context() as patch:
+        patch.setattr(Planner, "_fallback_branch_and_bound", _full_fallback)
+        full = Planner(config, scene.environment).plan(scene.ego, scene.road_users)
+    monkeypatch.setattr(Planner, "_fallback_branch_and_bound", tight)
+    fast = Planner(config, scene.environment).plan(scene.ego, scene.road_users)
+    assert fast.reason == full.reason and fast.chosen_index == full.chosen_index
+    assert fast.level_counts[UNASSESSED] > 0
+    ((brakes, rows),) = evaluated
+    assert brakes.size > 0 and np.isin(brakes, rows).all()
