@@ -29,7 +29,6 @@ from ethical_planner.cost import (
     total_cost,
 )
 from ethical_planner.environment import RoadEnvironment
-from ethical_planner.memory import keep_freed_memory
 from ethical_planner.prediction import Prediction, Predictor, make_predictor
 from ethical_planner.responsibility import LegalCorridors, collision_onset, responsibilities
 from ethical_planner.risk import (
@@ -392,9 +391,6 @@ class Planner:
             None builds the one named by ``config.prediction.model``.
         workers: threads of the risk kernels; None makes one with
             ``ETHICAL_PLANNER_THREADS`` threads.
-
-    The first planner of a process keeps freed memory in the process
-    (``ethical_planner.memory``; ``ETHICAL_PLANNER_KEEP_MEMORY=0`` turns that off).
     """
 
     def __init__(
@@ -427,7 +423,6 @@ class Planner:
         self.ego_mass = float(ego_mass)
         self.predictor = predictor
         self.workers = Workers() if workers is None else workers
-        keep_freed_memory()  # cycles reuse freed arrays instead of faulting fresh pages in
         self._previous: PreviousPlan | None = None
         #: Consecutive cycles on which the kept previous plan cost more than the cheapest.
         self._outvoted = 0
