@@ -328,8 +328,21 @@ def test_best_cost_of_each_level_is_logged_and_bounds_the_chosen_plan(hidden_ped
             assert np.asarray(strip)[:, 1] == pytest.approx(decision.candidate_y[index])
 
 
-def test_chosen_candidate_parameters_match_the_executed_plan(hidden_pedestrian_run):
-    _, probe, chunks = hidden_pedestrian_run
+@pytest.fixture(scope="module")
+def braking_run(tmp_path_factory):
+    # The car ahead brakes hard; the ethical planner chooses a braking candidate at 2.1 s
+    # (measured on main 0cad004; the hidden-pedestrian run chooses none since the
+    # commitment's persistence rule).
+    out = tmp_path_factory.mktemp("runs") / "braking"
+    scenario = dataclasses.replace(get_scenario("follower_brakes_weakly"), duration=2.5)
+    recorder = RerunRecorder(out, RecorderConfig(candidates=0))
+    probe = Probe()
+    summary = run_scenario(scenario, "ethical", 0, observer=ObserverGroup([recorder, probe]))
+    return summary, probe, read_chunks(recorder.path)
+
+
+def _check_chosen_candidate_parameters(probe, chunks):
+    """The recorded chosen-candidate series against each cycle's decision and executed plan."""
     end_speed = per_cycle(chunks, "/series/chosen/end_speed")
     end_offset = per_cycle(chunks, "/series/chosen/end_offset")
     horizon = per_cycle(chunks, "/series/chosen/horizon")
@@ -356,8 +369,20 @@ def test_chosen_candidate_parameters_match_the_executed_plan(hidden_pedestrian_r
             # (continuations and grid candidates may speed up).
             assert end_speed[c] == 0.0 and plan.v[-1] <= plan.v[0] + 1e-6
         assert family[c] == int(decision.candidate.kind)
-    # The run chooses braking candidates, so the check above is exercised.
+
+
+def test_chosen_candidate_parameters_match_the_executed_plan(hidden_pedestrian_run):
+    _, probe, chunks = hidden_pedestrian_run
+    _check_chosen_candidate_parameters(probe, chunks)
+    kinds = {d.candidate.kind for d in probe.decisions}
+    assert {CandidateKind.GRID, CandidateKind.CONTINUATION} <= kinds
+
+
+def test_chosen_braking_candidate_parameters_match_the_executed_plan(braking_run):
+    _, probe, chunks = braking_run
+    # The run chooses a braking candidate, so the braking branch of the check is exercised.
     assert any(d.candidate.kind == CandidateKind.BRAKE for d in probe.decisions)
+    _check_chosen_candidate_parameters(probe, chunks)
 
 
 def test_plan_switch_flags_a_plan_that_does_not_continue_the_previous_one(hidden_pedestrian_run):
