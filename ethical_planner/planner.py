@@ -1221,8 +1221,8 @@ def keep_previous_plan(
         return False, 0
     if j_kept <= j_best:
         return True, 0
-    if j_kept > j_best + commitment_margin(j_best, valid_level, commitment):
-        return False, 0
+    if not j_kept <= j_best + commitment_margin(j_best, valid_level, commitment):
+        return False, 0  # beyond the margin, or a cost is NaN: nothing to defend
     outvoted += 1
     if commitment.switch_after_cycles and outvoted >= commitment.switch_after_cycles:
         return False, 0

@@ -138,6 +138,10 @@ class ReferencePath:
         shape = np.broadcast_shapes(x.shape, y.shape)
         px = np.broadcast_to(x, shape).ravel()
         py = np.broadcast_to(y, shape).ravel()
+        if not (np.isfinite(px).all() and np.isfinite(py).all()):
+            # The compiled nearest-sample search would leave a non-finite point's foot
+            # unset (no distance compares below inf), i.e. return memory garbage.
+            raise ValueError("to_frenet: positions x and y must be finite (a diverged simulation?)")
         if px.size * self.s.size <= _BRUTE_FORCE_PAIRS:
             nearest = np.empty(px.size, dtype=np.int64)
             _nearest_sample(px, py, self.x, self.y, nearest)

@@ -171,6 +171,7 @@ class CrashAtRest(StopRule):
         """``crash`` once the crashed bodies have rested ``settle_time``."""
         world = run.world
         if run.crash_time is None or (world.crashed[0] and world.ego_on_plan):
+            self._since = None  # a rest only counts once the crashed ego no longer drives on
             return None
         speeds = world.scene.speeds()[world.crashed]
         if world.recorder.has_open_episodes or not bool((speeds < self.rest_speed).all()):

@@ -113,3 +113,9 @@ def test_the_planner_drops_a_kept_plan_after_switch_after_cycles():
     kept, reasons = run(0)
     assert kept == [True, True, True, True]
     assert all("kept the previous plan" in r for r in reasons)
+
+
+@pytest.mark.parametrize("j_best, j_kept", [(1.0, float("nan")), (float("nan"), 2.0)])
+def test_a_nan_cost_drops_the_previous_plan(j_best, j_kept):
+    # A NaN compares False: the rule must not read that as "within the margin" and keep it.
+    assert keep_previous_plan(j_best, j_kept, True, 3, DEFAULT) == (False, 0)

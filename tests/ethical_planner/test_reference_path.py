@@ -89,3 +89,15 @@ def test_evaluate_is_linear_interpolation_of_the_samples_as_numpy_does_it():
     np.testing.assert_array_equal(kappa, np.where(inside, np.interp(clipped, path.s, path.kappa), 0.0))
     np.testing.assert_array_equal(dkappa, np.where(inside, np.interp(clipped, path.s, path.dkappa), 0.0))
     assert path.evaluate(np.array([[1.0, 2.0]]))[0].shape == (1, 2)  # any shape in, same shape out
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+@pytest.mark.parametrize("many", [False, True])
+def test_to_frenet_refuses_non_finite_positions(bad, many):
+    # One point takes the compiled nearest-sample search, many the k-d tree; neither may
+    # return a foot point for a position that is not a number.
+    path = ReferencePath.from_polyline(np.c_[np.linspace(0.0, 100.0, 50), np.zeros(50)])
+    x = np.full(5000 if many else 1, 10.0)
+    x[-1] = bad
+    with pytest.raises(ValueError, match="finite"):
+        path.to_frenet(x, np.ones_like(x))

@@ -127,7 +127,7 @@ def test_cause_4_curve_truck_reaches_the_goal_passing_the_walker_with_clearance(
     through the free oncoming lane is the cheapest plan on every cycle, within the commitment
     margin of the crawl; the crawl was kept to the time limit until a kept plan outvoted on
     10 consecutive cycles is dropped (``CommitmentConfig.switch_after_cycles``): it passes at
-    10.1 s, reaches the goal at 22.1 s, 2.0 m from the walker at the closest."""
+    10.1 s, reaches the goal at 22.2 s, 2.0 m from the walker at the closest."""
     from mujoco_world.loop.runner import run_scenario
 
     summary = run_scenario(get_scenario("curve_truck"), "ethical", seed=0)
