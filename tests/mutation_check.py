@@ -263,6 +263,27 @@ MUTANTS = (
         "pass",
         ("tests/mujoco_world/loop/test_post_crash.py",),
     ),
+    Mutant(
+        "persistence_one_cycle_late",
+        "ethical_planner/planner.py",
+        "outvoted >= commitment.switch_after_cycles",
+        "outvoted > commitment.switch_after_cycles",
+        ("tests/ethical_planner/test_commitment.py",),
+    ),
+    Mutant(
+        "fallback_bound_doubled",
+        "ethical_planner/planner.py",
+        "bound = lower_bound(rows)",
+        "bound = 2.0 * lower_bound(rows)",
+        ("tests/ethical_planner/test_branch_and_bound.py",),
+    ),
+    Mutant(
+        "fallback_hard_stops_not_forced",
+        "ethical_planner/planner.py",
+        "first = np.flatnonzero((kind == CandidateKind.CONTINUATION) | (kind == CandidateKind.BRAKE))",
+        "first = np.flatnonzero(kind == CandidateKind.CONTINUATION)",
+        ("tests/ethical_planner/test_branch_and_bound.py",),
+    ),
 )
 
 
