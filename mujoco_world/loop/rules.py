@@ -207,7 +207,11 @@ class PostCrashTime(StopRule):
 
 
 class Goal(StopRule):
-    """The ego passed its goal on its route before any crash: ``goal``.
+    """The ego reached its goal before any crash: ``goal`` (``World.goal_reached``).
+
+    A CommonRoad goal region is reached when the ego's centre is inside it, a goal of
+    time only when the run has lasted its time; otherwise the ego's arc length along
+    its route reaches ``World.goal_s``.
 
     Args:
         rate: checks per simulated second [Hz] (projecting onto the route costs a
@@ -226,11 +230,11 @@ class Goal(StopRule):
         self.interval = self.multiple * max(1, int(round(1.0 / (self.rate * self.multiple * run.dt))))
 
     def check(self, run: RunState) -> Stop | None:
-        """``goal`` once the ego's arc length reaches ``World.goal_s``."""
+        """``goal`` once ``World.goal_reached``: the goal region, a goal of time only, or ``goal_s``."""
         world = run.world
-        if run.crash_time is not None or world.ego_progress() < world.goal_s:
+        if run.crash_time is not None or not world.goal_reached():
             return None
-        return Stop("goal", f"ego reached s = {world.goal_s:.1f} m on its route")
+        return Stop("goal", world.goal_description())
 
 
 class TimeLimit(StopRule):

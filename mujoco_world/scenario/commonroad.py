@@ -565,6 +565,12 @@ class _Importer:
             time = getattr(state, "time_step", None)
             if time is not None:
                 ends.append(float(getattr(time, "end", time)) * self.dt - self.t0)
+                opens = float(getattr(time, "start", time)) * self.dt - self.t0
+                if opens > 0.0 and position is not None:
+                    self.notes.append(
+                        f"goal: its time interval opens at {opens:.1f} s; entering the goal region "
+                        "earlier already counts (the interval's start is not checked)"
+                    )
             for name in ("velocity", "orientation"):
                 if getattr(state, name, None) is not None:
                     checked.add(name)

@@ -399,3 +399,24 @@ def test_real_a9_kerbs_lie_outside_the_road():
     # the lane's edge (y = -5860.37 there): the kerb now begins at the edge.
     nearest = min(box_footprint(b).distance(shapely.Point(414.90, -5860.77)) for b in boxes)
     assert nearest == pytest.approx(0.4, abs=0.1)
+
+
+def test_a_run_ends_with_goal_when_the_ego_enters_its_goal_region(tmp_path):
+    # The goal region (10 m x 3 m) lies on the ego's lane 50-60 m ahead; at about 10 m/s
+    # the ego's centre enters it after about 5 s, long before the 10 s time limit. The
+    # goal is the region, not the end of the route (which the path extends beyond the map).
+    problem = planning_problem(goal=((75.0, -LANE / 2), 10.0, 3.0), goal_steps=(0, 100))
+    scenario = import_commonroad(straight_road_file(tmp_path, problems=[problem]))
+    summary = run_scenario(scenario, "standard", 0)
+    assert summary.outcome == "goal", summary.reason
+    assert "goal region" in summary.reason
+    assert 3.5 < summary.duration < 7.0
+
+
+def test_a_goal_of_time_only_is_a_goal_once_its_time_has_passed(tmp_path):
+    problem = planning_problem(goal=None, goal_steps=(0, 30))
+    scenario = import_commonroad(straight_road_file(tmp_path, problems=[problem]))
+    summary = run_scenario(scenario, "standard", 0)
+    assert summary.outcome == "goal", summary.reason
+    assert "goal time 3 s" in summary.reason
+    assert summary.duration == pytest.approx(3.0, abs=0.05)
