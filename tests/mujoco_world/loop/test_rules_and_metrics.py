@@ -77,6 +77,13 @@ class FakeWorld:
     def ego_progress(self):
         return self.progress
 
+    def goal_reached(self):
+        # A road without a goal region or goal time: the route's arc length (World.goal_reached).
+        return self.progress >= self.goal_s
+
+    def goal_description(self):
+        return f"ego reached s = {self.goal_s:.1f} m on its route"
+
     def diverged(self, max_penetration):
         return self.why
 
