@@ -59,13 +59,13 @@ def cruise(world, speed=SPEED, accel=0.0, horizon=30.0):
     )
 
 
-def drive_with_spy(world, seconds):
-    """Step ``world`` with a fixed plan; per physics step the controls it applied.
+def spy_on_physics_steps(world):
+    """Record the ego's controls and state at the start of every physics step of ``world``.
 
     Returns:
-        rows of (t [s], ego in a pulse, ego crashed, ego ctrl (3,), ego qpos (3,), ego qvel (3,),
-        ego in an impact), taken when the physics step starts (after the controls were
-        set), and the measured collisions.
+        the list it fills: rows of (t [s], ego in a pulse, ego crashed, ego ctrl (3,),
+        ego qpos (3,), ego qvel (3,), ego in an impact), taken when the physics step
+        starts (after the controls were set).
     """
     rows = []
     scene = world.scene
@@ -86,8 +86,20 @@ def drive_with_spy(world, seconds):
         return physics_step(observer)
 
     scene.step = spy
+    return rows
+
+
+def drive_with_spy(world, seconds):
+    """Step ``world`` with a fixed plan; per physics step the controls it applied.
+
+    Returns:
+        rows of (t [s], ego in a pulse, ego crashed, ego ctrl (3,), ego qpos (3,), ego qvel (3,),
+        ego in an impact), taken when the physics step starts (after the controls were
+        set), and the measured collisions.
+    """
+    rows = spy_on_physics_steps(world)
     measured = []
-    for _ in range(int(round(seconds / scene.dt))):
+    for _ in range(int(round(seconds / world.scene.dt))):
         measured += world.step()
     return rows, measured
 
@@ -295,28 +307,6 @@ def test_scrape_wall_for_child_the_ethical_planner_passes_the_child_along_the_wa
 # ----------------------------------------------------------------- rear_ended_at_red_light
 
 
-def _spy(world):
-    """Record, per physics step, (time, ego in an impact, ego crashed, ego ctrl, ego qvel)."""
-    rows = []
-    scene = world.scene
-    physics_step = scene.step
-
-    def spy(observer=None):
-        rows.append(
-            (
-                world.time,
-                bool(world.recorder.in_impact[0]),
-                bool(world.crashed[0]),
-                scene.ctrl[0].copy(),
-                scene.qvel[0].copy(),
-            )
-        )
-        return physics_step(observer)
-
-    scene.step = spy
-    return rows
-
-
 @pytest.fixture(scope="module")
 def rear_ended():
     """rear_ended_at_red_light (selfish, its first 4.2 s) under both policies.
@@ -329,7 +319,7 @@ def rear_ended():
     out = {}
     for policy in ("continue", "brake"):
         loop = closed_loop(scenario, "selfish", config=RunConfig(post_crash=policy))
-        rows = _spy(loop.world)
+        rows = spy_on_physics_steps(loop.world)
         out[policy] = (loop.execute(), loop.world, rows)
     return out
 
@@ -358,15 +348,15 @@ def test_rear_ended_at_red_light_the_follower_strikes_once_and_no_one_else_is_to
 def test_rear_ended_at_red_light_the_measured_delta_v_excludes_the_controller(rear_ended, policy):
     summary, world, rows = rear_ended[policy]
     (hit,) = summary.ego_collisions
-    impact = [r for r in rows if r[1]]
+    impact = [r for r in rows if r[6]]
     assert len(impact) >= 3 and all(np.all(r[3] == 0.0) for r in impact)  # no controller force inside
     # The first impulse's J1 / m against the ego's centre-of-mass velocity change from
     # before the contact to the end of the impact: equal within the one physics step in
     # which the controller acts before the contact is known (mu g dt), so no controller
     # force is in the measured delta-v.
     start = next(i for i, r in enumerate(rows) if r[2])
-    end = next(i for i in range(start, len(rows)) if not rows[i][1])
-    dv_com = np.linalg.norm(rows[end][4][:2] - rows[start - 2][4][:2])
+    end = next(i for i in range(start, len(rows)) if not rows[i][6])
+    dv_com = np.linalg.norm(rows[end][5][:2] - rows[start - 2][5][:2])
     mu_g_dt = world.control.friction_mu * GRAVITY * world.scene.dt
     assert hit.measurement.a.dv_first == pytest.approx(dv_com, abs=mu_g_dt)
     # One impulse J1 on both: m_ego dv_ego = m_car dv_car.
@@ -388,9 +378,9 @@ def test_rear_ended_at_red_light_only_continue_keeps_the_ego_on_its_plans(rear_e
         world_b.control.friction_mu * GRAVITY,
         world_b.control.brake_time_constant,
     )
-    after_b = [r for r in rows_b if r[2] and not r[1]]
+    after_b = [r for r in rows_b if r[2] and not r[6]]
     assert len(after_b) > 500
-    for _, _, _, ctrl, qvel in after_b:
+    for _, _, _, ctrl, _, qvel, _ in after_b:
         speed = math.hypot(qvel[0], qvel[1])
         np.testing.assert_allclose(
             ctrl[:2], -mass * min(mu_g, speed / tau) * qvel[:2] / max(speed, 1e-9), atol=1e-6
