@@ -254,15 +254,20 @@ class Probe(RunObserver):
         self.cycle_times.append(time)
 
 
-@pytest.fixture(scope="module")
-def hidden_pedestrian_run(tmp_path_factory):
-    # The pedestrian stays hidden behind the parked van (occlusion on) until about 4.1 s.
-    out = tmp_path_factory.mktemp("runs") / "hidden-pedestrian"
-    scenario = dataclasses.replace(get_scenario("pedestrian_behind_parked"), duration=5.0)
+def _recorded_ethical_run(tmp_path_factory, scenario_name, duration):
+    """(summary, probe, chunks) of an ethical run of ``duration`` [s], recorded without candidates."""
+    out = tmp_path_factory.mktemp("runs") / scenario_name
+    scenario = dataclasses.replace(get_scenario(scenario_name), duration=duration)
     recorder = RerunRecorder(out, RecorderConfig(candidates=0))
     probe = Probe()
     summary = run_scenario(scenario, "ethical", 0, observer=ObserverGroup([recorder, probe]))
     return summary, probe, read_chunks(recorder.path)
+
+
+@pytest.fixture(scope="module")
+def hidden_pedestrian_run(tmp_path_factory):
+    # The pedestrian stays hidden behind the parked van (occlusion on) until about 4.1 s.
+    return _recorded_ethical_run(tmp_path_factory, "pedestrian_behind_parked", 5.0)
 
 
 def per_cycle(chunks, path):
@@ -333,12 +338,7 @@ def braking_run(tmp_path_factory):
     # The car ahead brakes hard; the ethical planner chooses a braking candidate at 2.1 s
     # (measured on main 0cad004; the hidden-pedestrian run chooses none since the
     # commitment's persistence rule).
-    out = tmp_path_factory.mktemp("runs") / "braking"
-    scenario = dataclasses.replace(get_scenario("follower_brakes_weakly"), duration=2.5)
-    recorder = RerunRecorder(out, RecorderConfig(candidates=0))
-    probe = Probe()
-    summary = run_scenario(scenario, "ethical", 0, observer=ObserverGroup([recorder, probe]))
-    return summary, probe, read_chunks(recorder.path)
+    return _recorded_ethical_run(tmp_path_factory, "follower_brakes_weakly", 2.5)
 
 
 def _check_chosen_candidate_parameters(probe, chunks):
