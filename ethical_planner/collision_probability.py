@@ -157,6 +157,17 @@ class OctagonTables:
     far: float
 
 
+def empty_tables(n_traj: int, n_t: int, gate_sigmas: float = 6.0) -> OctagonTables:
+    """The ``octagon_tables`` of no road user: nothing to tabulate (no kernel reads a row without one).
+
+    Args:
+        n_traj: candidates. n_t: steps. gate_sigmas: as ``octagon_tables`` (>= 0).
+    """
+    far = min(max(gate_sigmas, _FAR_MIN), _FAR_MAX)
+    empty = (np.zeros((_O_ROWS, 0)), np.zeros((_E_ROWS, 0)), np.ones((0, 1)))
+    return OctagonTables(*empty, n_traj, 0, n_t, False, far)
+
+
 def octagon_tables(
     ego_x: ArrayLike,
     ego_y: ArrayLike,
@@ -204,9 +215,7 @@ def octagon_tables(
     # Edges dropped beyond gate_sigmas whitened units, the gate's own scale (_FAR_MIN).
     far = min(max(gate_sigmas, _FAR_MIN), _FAR_MAX)
     if n_obs == 0 and component_weight is None:
-        # No road user: nothing to tabulate (no kernel reads a row without one).
-        empty = (np.zeros((_O_ROWS, 0)), np.zeros((_E_ROWS, 0)), np.ones((0, 1)))
-        return OctagonTables(*empty, n_traj, 0, n_t, False, far)
+        return empty_tables(n_traj, n_t, gate_sigmas)
 
     # Per (obs, t), computed once and gathered for the survivors: whitening matrix
     # W = L^-1 = [[w11, 0], [w21, w22]] of the Cholesky factor L, closed form for 2x2.

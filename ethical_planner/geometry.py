@@ -22,8 +22,8 @@ MIN_RELATIVE_SPEED = 1e-9
 MIN_SPEED = 1e-6
 
 # Corner signs (along, across) of a rectangle, counter-clockwise from the front right.
-_CORNER_ALONG = np.array([1.0, 1.0, -1.0, -1.0])
-_CORNER_ACROSS = np.array([-1.0, 1.0, 1.0, -1.0])
+CORNER_ALONG = np.array([1.0, 1.0, -1.0, -1.0])
+CORNER_ACROSS = np.array([-1.0, 1.0, 1.0, -1.0])
 
 
 def wrap_angle(angle: ArrayLike) -> np.ndarray:
@@ -82,8 +82,8 @@ def rectangle_corners(
     """
     yaw = np.asarray(yaw, dtype=float)
     c, s = np.cos(yaw)[..., None], np.sin(yaw)[..., None]
-    half_l = 0.5 * np.asarray(length, dtype=float)[..., None] * _CORNER_ALONG
-    half_w = 0.5 * np.asarray(width, dtype=float)[..., None] * _CORNER_ACROSS
+    half_l = 0.5 * np.asarray(length, dtype=float)[..., None] * CORNER_ALONG
+    half_w = 0.5 * np.asarray(width, dtype=float)[..., None] * CORNER_ACROSS
     x = np.asarray(x, dtype=float)[..., None]
     y = np.asarray(y, dtype=float)[..., None]
     return x + c * half_l - s * half_w, y + s * half_l + c * half_w

@@ -48,6 +48,7 @@ from ethical_planner.sampling import (
     FrenetState,
     PreviousPlan,
     emergency_braking,
+    every_row,
     frenet_state,
     sample_candidates,
 )
@@ -857,12 +858,14 @@ class Planner:
         Returns:
             (jerk_lon, jerk_lat, speed deviation, lateral deviation, lanes away).
         """
+        every = every_row(rows, candidates.n_traj)
+        v, d = (candidates.v, candidates.d) if every else (candidates.v[rows], candidates.d[rows])
         return (
             candidates.jerk_lon[rows],
             candidates.jerk_lat[rows],
-            np.abs(candidates.v[rows] - self.desired_speed).mean(axis=1),
+            np.abs(v - self.desired_speed).mean(axis=1),
             *path_deviation(
-                candidates.d[rows],
+                d,
                 self.environment.lane_offsets,
                 self.environment.lane_width,
                 self.config.weights.path_reference,
@@ -1145,7 +1148,10 @@ class Planner:
             )
             for k in rows
         )
-        values, counts = np.unique(grid.levels, return_counts=True)
+        lowest = int(grid.levels.min())
+        counts = np.bincount(grid.levels - lowest)
+        values = np.flatnonzero(counts) + lowest
+        counts = counts[values - lowest]
         return Decision(
             planner=self.config.name,
             trajectory=Trajectory.from_candidates(chosen.candidates, index),
@@ -1241,12 +1247,18 @@ def _best_by_level(grid: _Evaluation) -> dict[int, LevelBest]:
     order = rows[
         np.lexsort((costs.comfort[rows] + costs.mobility[rows], costs.total[rows], grid.levels[rows]))
     ]
-    levels, first = np.unique(grid.levels[order], return_index=True)
+    # ``order`` runs by level first: each level's cheapest is where the level changes.
+    ordered = grid.levels[order]
+    first = np.flatnonzero(np.concatenate(([True], ordered[1:] != ordered[:-1])))
+    levels = ordered[first]
     # Left out at a fallback level (``Planner._fallback_branch_and_bound``): their level
     # is final and their cost not below the chosen plan's, so that level's entry is exact.
-    left_out = (grid.levels == UNASSESSED) & ~np.isin(grid.possible, _FALLBACK_LEVELS)
-    unknown = {int(v) for v in np.unique(grid.possible[left_out])} - {int(Validity.VALID)}
+    left_out = grid.levels == UNASSESSED
+    for level in _FALLBACK_LEVELS:
+        left_out &= grid.possible != level
+    unknown: set[int] = set()
     if left_out.any():
+        unknown = {int(v) for v in np.unique(grid.possible[left_out])} - {int(Validity.VALID)}
         unknown.add(int(Validity.ABOVE_MAX_RISK))
     return {
         int(level): LevelBest(int(i), float(costs.total[i]), CandidateParameters.of(grid.candidates, int(i)))

@@ -18,20 +18,22 @@ import shapely
 from ethical_planner.collision_probability import (
     CollisionProbability,
     OctagonTables,
+    RiskMaximum,
     collision_probability,
+    empty_tables,
     gate,
     octagon_tables,
     risk_maximum,
 )
 from ethical_planner.config import RiskConfig
 from ethical_planner.environment import RoadEnvironment
-from ethical_planner.geometry import rectangle_corners
+from ethical_planner.geometry import CORNER_ACROSS, CORNER_ALONG, rectangle_corners
 from ethical_planner.harm import HarmModel, boundary_harm, collision_harm, collision_harm_at
 from ethical_planner.impulse import DeltaVModel
 from ethical_planner.jit import kernel
 from ethical_planner.prediction.base import Prediction
 from ethical_planner.road_users import RoadUserType, Shape
-from ethical_planner.sampling import Candidates
+from ethical_planner.sampling import Candidates, every_row
 from ethical_planner.workers import Workers
 
 
@@ -101,22 +103,31 @@ _GRID_SLACK = 1e-6
 
 @dataclass(frozen=True, slots=True, eq=False)
 class _InsideGrid:
-    """Square cells over a polygon's bounds, marked where the whole cell lies in its interior.
+    """Square cells over a polygon's bounds, marked where the whole cell lies in its interior or outside it.
 
-    A fast path for ``shapely.contains_xy``: a point in a marked cell is contained; the
-    others need the exact test. A cell is marked if its box, grown by _GRID_SLACK, lies
-    in the polygon's interior (``contains_properly``: no boundary contact), so rounding
-    of a point's cell index cannot put a point outside the polygon in a marked cell.
+    A fast path for ``shapely.contains_xy``: a point in an inside cell is contained, a
+    point in an outside cell is not; the others (cells the boundary crosses, points off
+    the grid inside the polygon's bounds) need the exact test. A cell is inside if
+    its box, grown by _GRID_SLACK, lies in the polygon's interior (``contains_properly``:
+    no boundary contact), and outside if that grown box is disjoint from the polygon
+    (no contact either), so rounding of a point's cell index cannot put a point in a
+    cell of the wrong kind. A point beyond the polygon's bounds (compared exactly, not
+    through a cell index) is outside.
 
     Attributes:
-        x0, y0: the grid's lower-left corner [m]. cell: cell edge [m].
-        inside: marked cells, shape (ny, nx).
+        x0, y0: the grid's lower-left corner, the polygon's lower bounds [m].
+        x1, y1: the polygon's upper bounds [m]. cell: cell edge [m].
+        inside: cells in the interior, shape (ny, nx).
+        outside: cells disjoint from the polygon, shape (ny, nx).
     """
 
     x0: float
     y0: float
+    x1: float
+    y1: float
     cell: float
     inside: np.ndarray
+    outside: np.ndarray
 
     @classmethod
     def of(cls, polygon: shapely.Geometry) -> _InsideGrid | None:
@@ -129,37 +140,58 @@ class _InsideGrid:
         ix, iy = np.meshgrid(np.arange(nx), np.arange(ny))
         left, bottom = x0 + ix * cell - _GRID_SLACK, y0 + iy * cell - _GRID_SLACK
         boxes = shapely.box(left, bottom, left + cell + 2 * _GRID_SLACK, bottom + cell + 2 * _GRID_SLACK)
-        return cls(x0, y0, cell, shapely.contains_properly(polygon, boxes))
+        inside = shapely.contains_properly(polygon, boxes)
+        return cls(x0, y0, x1, y1, cell, inside, shapely.disjoint(polygon, boxes))
 
-    def contains(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """True where the point lies in a marked cell (so in the polygon), shape of ``x``."""
-        result = np.empty(x.shape, dtype=np.bool_)
-        _in_marked_cell(
+    def state(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """1 where the point lies in an inside cell, 0 in an outside cell, -1 elsewhere, shape of ``x``."""
+        result = np.empty(x.shape, dtype=np.int8)
+        _cell_state(
             np.ascontiguousarray(x, dtype=float).reshape(-1),
             np.ascontiguousarray(y, dtype=float).reshape(-1),
-            self.x0,
-            self.y0,
+            np.array([self.x0, self.y0, self.x1, self.y1]),
             self.cell,
             self.inside,
+            self.outside,
             result.reshape(-1),
         )
         return result
 
+    def contains(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """True where the point lies in an inside cell (so in the polygon), shape of ``x``."""
+        return self.state(x, y) == 1
+
 
 @kernel
-def _in_marked_cell(
-    x: np.ndarray, y: np.ndarray, x0: float, y0: float, cell: float, inside: np.ndarray, out: np.ndarray
+def _cell_state(
+    x: np.ndarray,
+    y: np.ndarray,
+    bounds: np.ndarray,
+    cell: float,
+    inside: np.ndarray,
+    outside: np.ndarray,
+    out: np.ndarray,
 ) -> None:
-    """Kernel of ``_InsideGrid.contains``: out (m,) True where (x, y) lies in a marked cell.
+    """Kernel of ``_InsideGrid.state``: out (m,) 1, 0 or -1 (inside, outside, undecided).
 
-    The cell indices are floor((x - x0) / cell) and floor((y - y0) / cell); a point off
-    the grid (or NaN) is in no cell.
+    1 in an inside cell, 0 in an outside one or beyond ``bounds`` (x0, y0, x1, y1). The
+    cell indices are floor((x - x0) / cell) and floor((y - y0) / cell); a point off the
+    grid within the bounds (or NaN) is in no cell.
     """
     ny, nx = inside.shape
+    x0, y0, x1, y1 = bounds[0], bounds[1], bounds[2], bounds[3]
     for i in range(x.size):
+        if x[i] < x0 or x[i] > x1 or y[i] < y0 or y[i] > y1:
+            out[i] = 0
+            continue
         ix = np.floor((x[i] - x0) / cell)
         iy = np.floor((y[i] - y0) / cell)
-        out[i] = ix >= 0 and ix < nx and iy >= 0 and iy < ny and inside[int(iy), int(ix)]
+        out[i] = -1
+        if ix >= 0 and ix < nx and iy >= 0 and iy < ny:
+            if inside[int(iy), int(ix)]:
+                out[i] = 1
+            elif outside[int(iy), int(ix)]:
+                out[i] = 0
 
 
 def _eroded_area(area: shapely.Geometry, radius: float) -> tuple[shapely.Geometry, _InsideGrid | None]:
@@ -190,14 +222,90 @@ def _area_grid(area: shapely.Geometry) -> _InsideGrid | None:
 def _contains(
     polygon: shapely.Geometry, grid: _InsideGrid | None, x: np.ndarray, y: np.ndarray
 ) -> np.ndarray:
-    """``shapely.contains_xy(polygon, x, y)``; the exact test only for points outside marked cells."""
+    """``shapely.contains_xy(polygon, x, y)``; the exact test only for points ``grid`` leaves undecided."""
     if grid is None:
         return shapely.contains_xy(polygon, x, y)
-    result = grid.contains(x, y)
-    rest = np.flatnonzero(~result)
+    state = grid.state(x, y)
+    result = state == 1
+    rest = np.flatnonzero(state < 0)
     if rest.size:
         result.ravel()[rest] = shapely.contains_xy(polygon, x.ravel()[rest], y.ravel()[rest])
     return result
+
+
+def _corners_inside(
+    area: shapely.Geometry, x: np.ndarray, y: np.ndarray, yaw: np.ndarray, shape: Shape
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The footprints' corners (``rectangle_corners``) and whether all four lie in ``area``.
+
+    The corners and their cells (``_InsideGrid.state`` of the area's grid) in one
+    compiled pass; shapely tests only the undecided corners of footprints that have no
+    corner in an outside cell (one such corner already puts the footprint outside).
+
+    Args:
+        area: the drivable area. x, y, yaw: centres [m] and headings [rad], shape (m,).
+        shape: the footprint.
+
+    Returns:
+        (cx, cy, inside): corners [m], shape (m, 4) each, as ``rectangle_corners`` gives
+        them; whether every corner lies in ``area`` (``shapely.contains_xy``), shape (m,).
+    """
+    grid = _area_grid(area)
+    if grid is None:
+        cx, cy = rectangle_corners(x, y, yaw, shape.length, shape.width)
+        return cx, cy, np.all(shapely.contains_xy(area, cx, cy), axis=-1)
+    cx = np.empty((x.size, 4))
+    cy = np.empty((x.size, 4))
+    state = np.empty((x.size, 4), dtype=np.int8)
+    _corner_states(
+        np.ascontiguousarray(x, dtype=float),
+        np.ascontiguousarray(y, dtype=float),
+        np.cos(yaw),
+        np.sin(yaw),
+        0.5 * float(shape.length) * CORNER_ALONG,
+        0.5 * float(shape.width) * CORNER_ACROSS,
+        np.array([grid.x0, grid.y0, grid.x1, grid.y1]),
+        grid.cell,
+        grid.inside,
+        grid.outside,
+        cx,
+        cy,
+        state,
+    )
+    open_rows = ~(state == 0).any(axis=1)
+    rest = np.flatnonzero((state < 0) & open_rows[:, None])
+    if rest.size:
+        state.ravel()[rest] = shapely.contains_xy(area, cx.ravel()[rest], cy.ravel()[rest])
+    return cx, cy, (state == 1).all(axis=1)
+
+
+@kernel
+def _corner_states(
+    x: np.ndarray,
+    y: np.ndarray,
+    cos_yaw: np.ndarray,
+    sin_yaw: np.ndarray,
+    half_l: np.ndarray,
+    half_w: np.ndarray,
+    bounds: np.ndarray,
+    cell: float,
+    inside: np.ndarray,
+    outside: np.ndarray,
+    cx: np.ndarray,
+    cy: np.ndarray,
+    state: np.ndarray,
+) -> None:
+    """Kernel of ``_corners_inside``: the corners (m, 4) and their ``_cell_state`` (m, 4).
+
+    The corners as ``rectangle_corners`` computes them: x + c l - s w and y + s l + c w,
+    in that order.
+    """
+    for i in range(x.size):
+        c, s = cos_yaw[i], sin_yaw[i]
+        for j in range(4):
+            cx[i, j] = x[i] + c * half_l[j] - s * half_w[j]
+            cy[i, j] = y[i] + s * half_l[j] + c * half_w[j]
+        _cell_state(cx[i], cy[i], bounds, cell, inside, outside, state[i])
 
 
 def outside_drivable_area(
@@ -227,15 +335,14 @@ def outside_drivable_area(
     shape = Shape(shape.length + 2.0 * margin, shape.width + 2.0 * margin)
     half_diagonal = 0.5 * float(np.hypot(shape.length, shape.width))
     x, y, yaw = candidates.x, candidates.y, candidates.yaw
-    if rows is not None:
+    if rows is not None and not every_row(np.asarray(rows), x.shape[0]):
         x, y, yaw = x[rows], y[rows], yaw[rows]
     deep = _contains(*_eroded_area(area, half_diagonal), x, y)
     outside = np.zeros(x.shape, dtype=bool)
     edge = np.flatnonzero(~deep)
     if edge.size:
         poses = (x.ravel()[edge], y.ravel()[edge], yaw.ravel()[edge])
-        cx, cy = rectangle_corners(*poses, shape.length, shape.width)
-        corners_in = np.all(_contains(area, _area_grid(area), cx, cy), axis=-1)
+        cx, cy, corners_in = _corners_inside(area, *poses, shape)
         holes = _holes(area)
         if holes is not None and corners_in.any():
             # A hole (debris) smaller than the footprint can lie between its corners:
@@ -346,8 +453,11 @@ def prediction_tables(
     A mixture's components are the tables' components (``component_weight``): its p is
     the weighted sum of theirs, as in ``prediction_collision_probability``.
     """
-    x, y, yaw = candidates.x[rows], candidates.y[rows], candidates.yaw[rows]
     weight = prediction.component_weight if prediction.n_components > 1 else None
+    if prediction.n_obs == 0 and weight is None:
+        # The candidates' states are not read: spare gathering and checking them.
+        return empty_tables(rows.size, candidates.t.size, gate_sigmas)
+    x, y, yaw = candidates.x[rows], candidates.y[rows], candidates.yaw[rows]
     return octagon_tables(
         x,
         y,
@@ -408,16 +518,20 @@ def assess_risk(
     """
     workers = Workers() if workers is None else workers
     rows = np.asarray(rows, dtype=np.int64)
-    if triples is None:
-        triples = gated_triples(
-            candidates, rows, tables, table_rows, prediction, ego_shape, ego_mass, config, workers
-        )
-    flat, harm_obs, harm_ego = triples
-    maximum = risk_maximum(tables, table_rows, flat, harm_obs, harm_ego, epsilon, onset, workers, cap)
     m = rows.size
+    if tables.n_obs:
+        if triples is None:
+            triples = gated_triples(
+                candidates, rows, tables, table_rows, prediction, ego_shape, ego_mass, config, workers
+            )
+        flat, harm_obs, harm_ego = triples
+        maximum = risk_maximum(tables, table_rows, flat, harm_obs, harm_ego, epsilon, onset, workers, cap)
+    else:  # no road user: no pair to integrate (what ``risk_maximum`` returns for none)
+        none = np.zeros((m, 0))
+        maximum = RiskMaximum(none, none, none, none, none, np.zeros((m, 0), dtype=np.int64), 0, 0)
     boundary = np.zeros(m)
     leaves = outside.any(axis=1)
-    if config.boundary_harm and m:
+    if config.boundary_harm and leaves.any():
         if impact_speed is None:
             impact_speed = candidates.v[rows, outside.argmax(axis=1)]
         boundary = np.where(leaves, boundary_harm(impact_speed), 0.0)

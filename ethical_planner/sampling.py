@@ -141,6 +141,16 @@ class Candidates:
         return self.x.shape[0]
 
 
+def every_row(rows: np.ndarray, n: int) -> bool:
+    """Whether the indices ``rows`` are 0, 1, ..., n - 1: a gather by them would copy the array.
+
+    Args:
+        rows: candidate indices, shape (m,).
+        n: the number of candidates.
+    """
+    return rows.size == n and bool((rows == np.arange(n)).all())
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class CandidatePart:
     """Candidates of one family before their conversion to Cartesian states.

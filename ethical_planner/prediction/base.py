@@ -9,6 +9,7 @@ returning a ``Prediction`` can stand in its place: the planner and the world tak
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Protocol, runtime_checkable
@@ -266,8 +267,13 @@ def check_unique_ids(road_users: Sequence[RoadUser]) -> np.ndarray:
     return ids
 
 
+@functools.lru_cache(maxsize=16)
 def empty_prediction(n_t: int) -> Prediction:
-    """A prediction of no road users over ``n_t`` steps."""
+    """A prediction of no road users over ``n_t`` steps.
+
+    One instance per ``n_t`` (its arrays hold no element, so nothing can change them):
+    a planner without road users asks for it every cycle.
+    """
     empty = np.zeros((0, n_t))
     return Prediction(
         np.zeros(0, dtype=int),
