@@ -34,7 +34,7 @@ from ethical_planner.harm import HarmModel, boundary_harm, collision_harm
 from ethical_planner.planner import Planner
 from ethical_planner.responsibility import LegalCorridors, collision_onset, responsibilities
 from ethical_planner.risk import outside_drivable_area, prediction_collision_probability
-from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser
+from ethical_planner.road_users import DEFAULT_SHAPES, EGO_MASS_KG, EGO_SHAPE, KinematicState, RoadUser, Shape
 from ethical_planner.road_users import RoadUserType as T
 from ethical_planner.terminal import terminally_unsafe
 from ethical_planner.validity import UNASSESSED, Validity, physically_invalid, validity_levels
@@ -442,7 +442,44 @@ def test_inside_grid_fast_path_equals_shapely_contains(case):
     y = np.concatenate([y, ey, ey - tiny, ey + tiny, ey, vy])
     expected = shapely.contains_xy(polygon, x, y)
     np.testing.assert_array_equal(_contains(polygon, grid, x, y), expected)
-    # The fast path decides most points inside (on a large map with coarse cells, fewer).
+    # The fast path decides most points inside (on a large map with coarse cells, fewer)
+    # and most points outside (outside cells and beyond the bounds), never wrongly.
+    state = grid.state(x, y)
+    assert expected[state == 1].all() and not expected[state == 0].any()
     share = grid.contains(x, y).sum() / expected.sum()
     assert share > (0.05 if case == "large_map" else 0.5)
+    assert (state == 0).sum() / (~expected).sum() > 0.5
     assert not shapely.contains_xy(polygon, vx, vy).any()
+
+
+@pytest.mark.parametrize("case", ["curved_road", "debris"])
+def test_footprint_corners_kernel_equals_rectangle_corners_and_shapely(case):
+    """The road-edge test's fused corner pass: the corners of ``rectangle_corners`` to the
+    bit, and "all four inside" as shapely says, for footprints across the road's edges."""
+    import shapely
+
+    from ethical_planner.geometry import rectangle_corners
+    from ethical_planner.risk import _corners_inside
+
+    env = RoadEnvironment.along_path(
+        [[0, 0], [20, 2], [40, 10], [55, 25], [60, 45]], lanes_left=1, lanes_right=1, margin=0.3
+    )
+    area = env.drivable_area
+    if case == "debris":
+        area = area.difference(
+            shapely.union_all([shapely.box(10, -1, 12, 1), shapely.Point(45, 15).buffer(0.8)])
+        )
+    shapely.prepare(area)
+    rng = np.random.default_rng(11)
+    x0, y0, x1, y1 = area.bounds
+    m = 60_000
+    x, y = rng.uniform(x0 - 3, x1 + 3, m), rng.uniform(y0 - 3, y1 + 3, m)
+    yaw = rng.uniform(-np.pi, np.pi, m)
+    shape = Shape(5.5, 2.8)
+    cx, cy, inside = _corners_inside(area, x, y, yaw, shape)
+    ex, ey = rectangle_corners(x, y, yaw, shape.length, shape.width)
+    np.testing.assert_array_equal(cx, ex)
+    np.testing.assert_array_equal(cy, ey)
+    expected = shapely.contains_xy(area, ex, ey).all(axis=1)
+    np.testing.assert_array_equal(inside, expected)
+    assert 0.05 < expected.mean() < 0.95

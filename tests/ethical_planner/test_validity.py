@@ -278,3 +278,24 @@ def test_limits_kernel_equals_the_numpy_expressions_on_random_plans():
     for name in LIMITS:
         np.testing.assert_array_equal(got[name], expected[name], err_msg=name)
         assert 0 < expected[name].sum() < n, name  # the draw straddles every limit
+
+
+def test_friction_circle_shortcut_is_exact_at_the_circle():
+    # The kernel skips hypot where |a| + v^2 |kappa| proves the point inside the circle.
+    # At the circle itself (one component ~0, so hypot equals the sum to the last bits)
+    # the answer must still be hypot's, a few ulps either side of the radius.
+    radius = VEHICLE.friction_acceleration + 1e-6
+    ulps = np.arange(-6, 7)
+    along = np.nextafter(radius, np.inf) + ulps * np.spacing(radius)  # a alone on the circle
+    n = along.size
+    v = np.full((2 * n, 3), 10.0)
+    a = np.zeros((2 * n, 3))
+    kappa = np.zeros((2 * n, 3))
+    a[:n, 1] = along  # braking or accelerating at the radius, straight
+    kappa[n:, 1] = along / 100.0  # turning at the radius, coasting: lateral = v^2 kappa
+    plans = SimpleNamespace(v=v, a=a, kappa=kappa, s_dot=v.copy())
+    got = physically_invalid(plans, VEHICLE)["friction"]
+    lateral = np.square(v) * np.abs(kappa)
+    expected = np.any(np.hypot(a, lateral)[:, 1:] > radius, axis=1)
+    np.testing.assert_array_equal(got, expected)
+    assert 0 < expected[:n].sum() < n and 0 < expected[n:].sum() < n
