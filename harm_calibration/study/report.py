@@ -215,6 +215,12 @@ def _runs_section(analysis: StudyAnalysis, rejected_by_reason: dict[str, list[st
         )
     out += [
         "",
+        "`left_map`: the ego's centre left an imported map beyond its end along its route (it missed "
+        "its goal region, or had none) before any crash; the run ends there, as a recorded road user "
+        "leaves where its recording ends, and its distance and risks count up to that moment.",
+    ]
+    out += [
+        "",
         "Crash attribution: each run's crash is classified by its first ego-involved collision, from "
         "the record (the bodies' approach speeds to the contact point, where the ego was hit, and "
         "whether the other body replays a recording, blind to the ego):",

@@ -12,6 +12,12 @@ run. ``default_rules`` gives the built-in ones in their order:
    red light after a contact will drive on).
 3. ``PostCrashTime``: ``post_crash_time`` after the crash: ``crash``.
 4. ``Goal``: before any crash, the ego passed its goal on its route: ``goal``.
+5. ``LeftMap``: before any crash, the ego's centre left a mapped road (``road.kind =
+   "map"``, e.g. an imported CommonRoad map) beyond the map's end along its route:
+   ``left_map``. Past its last lanelet the ego's path runs on straight (the planner's
+   horizon needs a path) over ground the map does not describe: the run ends there, as
+   a recorded road user leaves the world where its recording ends. Catalog roads do not
+   end before the ego's goal (``ego.goal_s`` lies on the route), so the rule is off there.
 
 ``TimeLimit`` (the scenario's duration: ``crash`` after a crash; else ``timeout``,
 ``stopped_safely`` or ``no_progress`` as ``loop.progress`` tells a slow ego, one that
@@ -30,22 +36,26 @@ still has to reach its goal.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+import shapely
 
 from mujoco_world.evaluation.compare import ImpactRecord
 from mujoco_world.loop.config import RunConfig
 from mujoco_world.loop.progress import StallConfig, blocked_way, waiting_at_red
 from mujoco_world.loop.state import RunState
 from mujoco_world.loop.world import World
+from mujoco_world.scenario.road import map_end
+from mujoco_world.scenario.spec import RoadKind
 
 #: Outcomes that say the run ended without a crash: a counted collision measured when
 #: the run is closed (an episode still open at the end) turns them into ``crash``.
-NO_CRASH_OUTCOMES = frozenset({"goal", "timeout", "stopped_safely", "no_progress"})
+NO_CRASH_OUTCOMES = frozenset({"goal", "timeout", "stopped_safely", "no_progress", "left_map"})
 
 
 @dataclass(frozen=True, slots=True)
@@ -227,7 +237,7 @@ class Goal(StopRule):
 
     def start(self, run: RunState) -> None:
         """Set the interval from the physics step."""
-        self.interval = self.multiple * max(1, int(round(1.0 / (self.rate * self.multiple * run.dt))))
+        self.interval = _rate_interval(self.rate, self.multiple, run.dt)
 
     def check(self, run: RunState) -> Stop | None:
         """``goal`` once ``World.goal_reached``: the goal region, a goal of time only, or ``goal_s``."""
@@ -235,6 +245,66 @@ class Goal(StopRule):
         if run.crash_time is not None or not world.goal_reached():
             return None
         return Stop("goal", world.goal_description())
+
+
+def _rate_interval(rate: float, multiple: int, dt: float) -> int:
+    """Physics steps between checks at ``rate`` [Hz], a multiple of ``multiple``, at step ``dt`` [s]."""
+    return multiple * max(1, int(round(1.0 / (rate * multiple * dt))))
+
+
+class LeftMap(StopRule):
+    """The ego's centre left a mapped road beyond its end, before any crash: ``left_map``.
+
+    Only for ``road.kind = "map"``. The map's end is where the ego's reference path,
+    followed from the ego's start, leaves the drivable area for good
+    (``road.map_end``); the rule fires once the ego's centre is outside the drivable
+    area and beyond that arc length. An ego that swerves off a road's side, or crosses a
+    sliver between lanelets, is not past the end. The reason gives how far beyond the
+    end the ego is and, for a goal region, how close the ego came to it (at the checks).
+
+    Args:
+        rate: checks per simulated second [Hz].
+        interval_multiple: the interval is rounded to a multiple of this (``Goal``).
+    """
+
+    def __init__(self, rate: float = 10.0, interval_multiple: int = 1) -> None:
+        self.rate = rate
+        self.multiple = interval_multiple
+        self.interval = interval_multiple
+        self.end = math.inf
+        self.area = None
+        self.closest = math.inf
+
+    def start(self, run: RunState) -> None:
+        """The interval, and the map's end along the ego's route (``inf``: not a map)."""
+        self.interval = _rate_interval(self.rate, self.multiple, run.dt)
+        world = run.world
+        self.closest = math.inf
+        self.end, self.area = math.inf, None
+        if run.scenario.road.kind is RoadKind.MAP:
+            self.area = world.road.drivable_area
+            self.end = map_end(self.area, world.ego_path, world.ego_progress())
+
+    def check(self, run: RunState) -> Stop | None:
+        """``left_map`` once the ego's centre is off the map and beyond its end."""
+        if self.area is None or not math.isfinite(self.end) or run.crash_time is not None:
+            return None
+        world = run.world
+        x, y = float(world.positions[0, 0]), float(world.positions[0, 1])
+        if world.goal_area is not None:
+            self.closest = min(self.closest, float(world.goal_area.distance(shapely.Point(x, y))))
+        if shapely.contains_xy(self.area, x, y):
+            return None
+        s = world.ego_progress()
+        if s <= self.end:
+            return None
+        reason = (
+            f"the ego left the map {s - self.end:.1f} m beyond its end along the route "
+            f"(s = {s:.1f} m; the mapped road ends at s = {self.end:.1f} m)"
+        )
+        if world.goal_area is not None:
+            reason += f"; it came within {self.closest:.2f} m of its goal region"
+        return Stop("left_map", reason)
 
 
 class TimeLimit(StopRule):
@@ -308,6 +378,7 @@ def default_rules(config: RunConfig) -> tuple[StopRule, ...]:
         CrashAtRest(config.rest_speed, config.settle_time, every),
         PostCrashTime(config.post_crash_time, every),
         Goal(10.0, every),
+        LeftMap(10.0, every),
     )
 
 
@@ -342,6 +413,7 @@ __all__ = [
     "Diverged",
     "EgoContact",
     "Goal",
+    "LeftMap",
     "PostCrashTime",
     "Stop",
     "StopRule",

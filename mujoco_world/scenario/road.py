@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
@@ -18,6 +19,9 @@ from shapely.geometry import LineString, MultiLineString, MultiPolygon, Polygon,
 
 from ethical_planner.validation import check
 from mujoco_world.scenario.spec import Boundary, DebrisSpec, RoadKind, RoadName, RoadSpec, RouteSpec, Turn
+
+if TYPE_CHECKING:
+    from ethical_planner.reference_path import ReferencePath
 
 #: Spacing of sampled centre lines [m].
 _SAMPLE_M = 1.0
@@ -460,6 +464,47 @@ def close_union(polygons: Sequence[Polygon], gap: float = AREA_GAP_M):  # noqa: 
     """
     grown = [p.buffer(gap, join_style="mitre") for p in polygons if not p.is_empty and p.area > 0]
     return shapely.union_all(grown).buffer(-gap, join_style="mitre")
+
+
+#: A route's stretch outside the drivable area shorter than this (a joint or a sliver
+#: between lanelets) does not end the mapped road [m].
+MAP_GAP_M = 2.0
+#: Spacing of the samples along a route that find where its mapped road ends [m].
+MAP_END_STEP_M = 0.1
+
+
+def map_end(area: Polygon | MultiPolygon, path: ReferencePath, s_from: float) -> float:
+    """Arc length along ``path`` where its mapped road ends [m], or ``inf``.
+
+    The end is where the path, followed from ``s_from``, leaves ``area`` for a stretch
+    of at least ``MAP_GAP_M`` (or for the rest of the path): an imported map's path
+    runs on past its last lanelet (``commonroad.PATH_EXTENSION_M``). Shorter stretches
+    outside are bridged; a path that starts outside the area is followed until it
+    enters. The result lies within ``MAP_END_STEP_M / 2`` of the crossing.
+
+    Args:
+        area: the drivable area [m].
+        path: the ego's reference path.
+        s_from: arc length to start from (the ego's start) [m].
+
+    Returns:
+        the arc length of the map's end [m]; ``inf`` if the path never leaves the area
+        after entering it, or never enters it.
+    """
+    s = np.arange(max(s_from, 0.0), path.length + MAP_END_STEP_M, MAP_END_STEP_M)
+    x, y = path.evaluate(s)[:2]
+    inside = shapely.contains_xy(area, x, y)
+    if not inside.any():
+        return math.inf
+    entered = int(np.argmax(inside))
+    outside = ~inside[entered:]
+    # Runs of samples outside: starts where outside switches on, ends where it switches off.
+    edges = np.diff(np.concatenate([[0], outside.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    for start, end in zip(starts, ends, strict=True):
+        if end == len(outside) or (end - start) * MAP_END_STEP_M >= MAP_GAP_M:
+            return float(s[entered + start]) - 0.5 * MAP_END_STEP_M
+    return math.inf
 
 
 def _map_road(spec: RoadSpec) -> RoadGeometry:

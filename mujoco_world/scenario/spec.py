@@ -31,7 +31,7 @@ from mujoco_world.scenario.imported import MapSpec, ObstacleSpec, Points, Record
 
 #: Run outcomes the closed loop gives (``loop.summary``; here so that ``[expect]`` can
 #: name them).
-OUTCOMES = ("goal", "timeout", "stopped_safely", "no_progress", "crash", "failed")
+OUTCOMES = ("goal", "timeout", "stopped_safely", "no_progress", "left_map", "crash", "failed")
 
 
 def knots(owner: str, name: str, value: Any) -> tuple[tuple[float, float], ...]:

@@ -31,6 +31,7 @@ from mujoco_world.loop.rules import (
     Diverged,
     EgoContact,
     Goal,
+    LeftMap,
     PostCrashTime,
     Stop,
     StopRule,
@@ -208,7 +209,7 @@ def test_diverged_is_an_untrusted_failure():
 
 def test_default_rules_order_and_interval():
     rules = default_rules(RunConfig(distance_interval=5))
-    assert [type(r) for r in rules] == [Diverged, CrashAtRest, PostCrashTime, Goal]
+    assert [type(r) for r in rules] == [Diverged, CrashAtRest, PostCrashTime, Goal, LeftMap]
     assert all(r.interval == 5 for r in rules)
 
 

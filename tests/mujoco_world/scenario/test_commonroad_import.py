@@ -420,3 +420,26 @@ def test_a_goal_of_time_only_is_a_goal_once_its_time_has_passed(tmp_path):
     assert summary.outcome == "goal", summary.reason
     assert "goal time 3 s" in summary.reason
     assert summary.duration == pytest.approx(3.0, abs=0.05)
+
+
+def test_an_ego_that_passes_beside_its_goal_region_leaves_the_map_at_its_end(tmp_path):
+    # The road ends at x = 300 m. The goal region (x 280-290 m) lies on the ego's lane,
+    # its near edge 0.40 m right of the lane's centre line: the ego's centre (on the
+    # centre line) passes beside it, which is not reaching it (CommonRoad's
+    # GoalRegion.is_reached asks the position inside the region). The ego keeps its lane
+    # at 10 m/s (a scripted manoeuvre: the planners stop at a map's end unless an
+    # evasion takes them past it, as in the study's SinD runs) along the path's straight
+    # extension and leaves the map: left_map, just past x = 300 m (the map's end at
+    # s = 100 m along the path, which starts on lanelet 3 at x = 200 m) after about 4 s,
+    # at most 1 m (0.1 s at 10 m/s) beyond it, long before the 8 s time
+    # limit, and the reason says how close it came to the goal region.
+    problem = planning_problem(start=(260.0, -LANE / 2), goal=((285.0, -LANE / 2 - 0.9), 10.0, 1.0))
+    scenario = import_commonroad(straight_road_file(tmp_path, problems=[problem]))
+    summary = run_scenario(scenario, "keep_lane", 0)
+    assert summary.outcome == "left_map", summary.reason
+    assert "the mapped road ends at s = 100.0 m" in summary.reason
+    beyond = float(summary.reason.split("the ego left the map ")[1].split(" m")[0])
+    assert 0.0 < beyond <= 1.05  # checked at 10 Hz at 10 m/s
+    closest = float(summary.reason.split("came within ")[1].split(" m")[0])
+    assert closest == pytest.approx(0.40, abs=0.1)
+    assert 3.5 < summary.duration < 6.0
