@@ -67,6 +67,9 @@ GROUP_LABELS = {
 }
 #: Values per group and planner in Fig. 5.
 TOP_N = 100
+#: A goal reached within this time of the start [s] is counted apart in the runs table: the
+#: planning problem put the ego at (or a step from) its goal region, e.g. 11 SinD files.
+QUICK_GOAL_S = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -275,6 +278,8 @@ class PlannerTable:
         crash_classes: ego crashes per class (``attribution.ATTRIBUTIONS``, every class).
         ego_crashes_excluding: ego crashes not struck from behind by a replay.
         crashes_per_1000km_excluding: those per 1000 km with an exact interval.
+        quick_goals: goal runs that ended within ``QUICK_GOAL_S`` of the start (the planning
+            problem places the ego at or next to its goal region; they test little).
     """
 
     runs: int
@@ -288,6 +293,7 @@ class PlannerTable:
     crash_classes: dict[str, int]
     ego_crashes_excluding: int
     crashes_per_1000km_excluding: Interval
+    quick_goals: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -487,6 +493,7 @@ def _table(runs: Sequence[StudyRun]) -> PlannerTable:
         crash_classes={c: sum(1 for r in ego if r.crash == c) for c in ATTRIBUTIONS},
         ego_crashes_excluding=len(excluding),
         crashes_per_1000km_excluding=poisson_rate_ci(len(excluding), km, per=1000.0),
+        quick_goals=sum(1 for r in imported if r.outcome == "goal" and r.duration <= QUICK_GOAL_S),
     )
 
 
@@ -518,6 +525,7 @@ __all__ = [
     "GROUPS",
     "GROUP_LABELS",
     "OTHERS",
+    "QUICK_GOAL_S",
     "TOP_N",
     "BodyHarm",
     "GroupDefinition",

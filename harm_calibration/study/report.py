@@ -12,7 +12,15 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from harm_calibration.study.analysis import GROUP_LABELS, GROUPS, OTHERS, OUTCOMES, TOP_N, StudyAnalysis
+from harm_calibration.study.analysis import (
+    GROUP_LABELS,
+    GROUPS,
+    OTHERS,
+    OUTCOMES,
+    QUICK_GOAL_S,
+    TOP_N,
+    StudyAnalysis,
+)
 from harm_calibration.study.attribution import ATTRIBUTIONS, STRUCK_FROM_BEHIND_BY_REPLAY
 from harm_calibration.study.statistics import Interval, PairedTest
 
@@ -213,6 +221,7 @@ def _runs_section(analysis: StudyAnalysis, rejected_by_reason: dict[str, list[st
             f"{t.avoidable} | {t.unavoidable} | {t.km:.1f} | {t.crashes_per_1000km.text(3)} | "
             f"{t.ego_crashes_excluding} | {t.crashes_per_1000km_excluding.text(3)} |"
         )
+    quick = ", ".join(f"{p} {t.quick_goals}" for p, t in analysis.table.items())
     out += [
         "",
         "`left_map`: the ego's centre left an imported map beyond its end along its route (it missed "
@@ -220,6 +229,9 @@ def _runs_section(analysis: StudyAnalysis, rejected_by_reason: dict[str, list[st
         "leaves where its recording ends, and its distance and risks count up to that moment.",
     ]
     out += [
+        "",
+        f"Goals reached within {QUICK_GOAL_S:g} s of the start (the planning problem places the ego "
+        f"at or next to its goal region, so the run tests little; counted in `goal` above): {quick}.",
         "",
         "Crash attribution: each run's crash is classified by its first ego-involved collision, from "
         "the record (the bodies' approach speeds to the contact point, where the ego was hit, and "

@@ -140,3 +140,23 @@ def test_vrus_are_judged_against_the_other_third_parties_not_against_a_superset(
 def test_an_unknown_group_is_refused():
     with pytest.raises(ValueError, match="unknown group 'cyclists'; allowed: ego, third_party"):
         top_risks([_run("a", "ethical")], "cyclists", GroupDefinition())
+
+
+def test_goals_within_a_second_are_counted_apart_in_the_table_and_the_report():
+    from dataclasses import replace
+
+    from harm_calibration.study.report import render
+
+    # 0.1 s and exactly 1.0 s count (the SinD egos that start at their goal region's edge);
+    # 1.1 s and a crash at 0.5 s do not.
+    runs = [
+        replace(_run("a", "ethical"), duration=0.1),
+        replace(_run("b", "ethical"), duration=1.0),
+        replace(_run("c", "ethical"), duration=1.1),
+        replace(_run("d", "ethical", harms=(BodyHarm("ego", 0.1, True),)), duration=0.5),
+    ]
+    analysis = analyse(runs, ["ethical"], resamples=50)
+    assert analysis.table["ethical"].quick_goals == 2
+    assert analysis.table["ethical"].outcomes["goal"] == 3
+    report = render(analysis, [], [], {})
+    assert "Goals reached within 1 s of the start" in report and "ethical 2." in report
