@@ -29,6 +29,12 @@ _SAMPLE_M = 1.0
 BOUNDARY_THICKNESS_M = 0.4
 #: Length of the probes either side of a boundary segment that tell which side is the road [m].
 OUTWARD_PROBE_M = 1.0
+#: How far the road may reach into a wall or kerb box [m]: a boundary is simplified twice
+#: (an imported map's outline by 0.1 m, then by 0.05 m for its boxes), so a segment's chord
+#: can lie up to 0.15 m inside the road.
+BOX_ROAD_TOLERANCE_M = 0.15
+#: Spacing along a boundary segment of the cross-sections that tell where its box may stand [m].
+BOX_SAMPLE_M = 0.1
 #: Height of walls and kerbs [m] (only for pictures: the world is planar).
 BOUNDARY_HEIGHT_M = {Boundary.WALL: 1.0, Boundary.KERB: 0.15}
 
@@ -341,6 +347,7 @@ class RoadGeometry:
             return ()
         t = BOUNDARY_THICKNESS_M
         height = BOUNDARY_HEIGHT_M[kind]
+        shapely.prepare(self.drivable_area)
         boxes = []
         for line in self.boundaries:
             simple = np.asarray(LineString(line).simplify(0.05).coords)
@@ -352,18 +359,52 @@ class RoadGeometry:
                 tangent = seg / length
                 mid = 0.5 * (a + b)
                 normal = self._outward(mid, np.array([-tangent[1], tangent[0]]))
-                center = mid + 0.5 * t * normal
-                boxes.append(
-                    StaticBox(
-                        center=(float(center[0]), float(center[1])),
-                        half_length=0.5 * length + 0.5 * t,
-                        half_width=0.5 * t,
-                        half_height=0.5 * height,
-                        yaw=float(math.atan2(tangent[1], tangent[0])),
-                        kind=kind,
+                spans = self._off_road_spans(a, tangent, normal, length)
+                if spans == [(-0.5 * t, length + 0.5 * t)]:
+                    spans = [None]  # the whole box, as it always stood
+                for span in spans:
+                    if span is None:
+                        center, half_length = mid + 0.5 * t * normal, 0.5 * length + 0.5 * t
+                    else:
+                        u0, u1 = span
+                        center = a + 0.5 * (u0 + u1) * tangent + 0.5 * t * normal
+                        half_length = 0.5 * (u1 - u0)
+                    boxes.append(
+                        StaticBox(
+                            center=(float(center[0]), float(center[1])),
+                            half_length=half_length,
+                            half_width=0.5 * t,
+                            half_height=0.5 * height,
+                            yaw=float(math.atan2(tangent[1], tangent[0])),
+                            kind=kind,
+                        )
                     )
-                )
         return tuple(boxes)
+
+    def _off_road_spans(
+        self, a: np.ndarray, tangent: np.ndarray, normal: np.ndarray, length: float
+    ) -> list[tuple[float, float]]:
+        """Where along a boundary segment its box may stand: spans (u0, u1) [m] from ``a``.
+
+        A segment's box runs from ``t / 2`` before ``a`` to ``t / 2`` past its end (so
+        that boxes close the corners between them) and ``t`` outward. It stands at a
+        cross-section only where the road reaches at most ``BOX_ROAD_TOLERANCE_M`` into
+        it (checked every ``BOX_SAMPLE_M`` at the depths beyond the tolerance): not in a
+        crack between lanelets narrower than the box (the tip of the gap between two
+        lanelets that part at an angle, where there is road on the box's far side), nor
+        with its end past a sharp inner corner of the road, where it stood in the lane.
+        """
+        t = BOUNDARY_THICKNESS_M
+        n = max(math.ceil((length + t) / BOX_SAMPLE_M), 1) + 1
+        u = np.linspace(-0.5 * t, length + 0.5 * t, n)
+        depths = np.arange(BOX_ROAD_TOLERANCE_M + 0.05, t + 1e-9, 0.1)
+        points = a + u[:, None, None] * tangent + depths[None, :, None] * normal  # (n, k, 2)
+        free = ~shapely.contains_xy(self.drivable_area, points[..., 0], points[..., 1]).any(axis=1)
+        if free.all():
+            return [(float(u[0]), float(u[-1]))]
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(np.int8), [0]])))
+        spans = [(float(u[i]), float(u[j - 1])) for i, j in zip(edges[::2], edges[1::2], strict=True)]
+        return [(u0, u1) for u0, u1 in spans if u1 - u0 >= BOX_SAMPLE_M - 1e-9]
 
 
 #: Height of debris boxes [m]: what they hide from the ego's sensor (physics.sight) and their picture.

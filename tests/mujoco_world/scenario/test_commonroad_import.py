@@ -401,6 +401,30 @@ def test_real_a9_kerbs_lie_outside_the_road():
     assert nearest == pytest.approx(0.4, abs=0.1)
 
 
+@needs_shared
+def test_real_lanker_kerbs_stand_off_the_road():
+    # USA_Lanker-2_10: lanelets that part at an angle leave wedge-shaped cracks in the map;
+    # their kerbs stood across the crack's tip on the next lane (0.45 m into it). In the
+    # study (main 4293038) the ethical and the standard ego's front-right corner met one
+    # at (-13.36, -23.94) at 8.3 m/s, 0.29 m inside the drivable area.
+    scenario = import_commonroad(SHARED / "tum-cps-scenarios/NGSIM/USA_Lanker-2_10_T-1.xml")
+    road = build_road(scenario.road)
+    area = road.drivable_area
+    boxes = road.static_boxes()
+    assert len(boxes) > 50
+    assert min(box_footprint(b).distance(shapely.Point(-13.36, -23.94)) for b in boxes) > 1.0
+    # Independent of the rule: a 5 cm grid over every box, the deepest point in the road.
+    deepest = 0.0
+    for b in boxes:
+        u, v = np.meshgrid(np.arange(-b.half_length, b.half_length + 1e-9, 0.05), np.linspace(-0.2, 0.2, 9))
+        c, s = math.cos(b.yaw), math.sin(b.yaw)
+        points = shapely.points(b.center[0] + u * c - v * s, b.center[1] + u * s + v * c).ravel()
+        inside = points[shapely.contains(area, points)]
+        if inside.size:
+            deepest = max(deepest, float(shapely.distance(area.boundary, inside).max()))
+    assert deepest < 0.15  # the outline's simplification (0.1 m, then 0.05 m); was 0.45
+
+
 def test_a_run_ends_with_goal_when_the_ego_enters_its_goal_region(tmp_path):
     # The goal region (10 m x 3 m) lies on the ego's lane 50-60 m ahead; at about 10 m/s
     # the ego's centre enters it after about 5 s, long before the 10 s time limit. The

@@ -17,7 +17,7 @@ from mujoco_world.scenario.catalog import (
     get_scenario,
     random_scenario,
 )
-from mujoco_world.scenario.road import BOUNDARY_THICKNESS_M, RoadGeometry, build_road
+from mujoco_world.scenario.road import BOUNDARY_THICKNESS_M, RoadGeometry, box_footprint, build_road
 from mujoco_world.scenario.sources import SCENARIO_SOURCES, resolve_scenario
 from mujoco_world.scenario.spec import RoadSpec, RouteSpec, Scenario, load_scenario, scenario_from_dict
 
@@ -265,3 +265,44 @@ def test_a_boundary_a_little_inside_the_road_gets_its_kerb_on_the_outside():
     road = RoadGeometry(spec, np.array([[0.0, 5.0], [100.0, 5.0]]), None, area, (line,))
     (kerb,) = road.static_boxes()
     assert kerb.center == pytest.approx((50.0, 9.92 + 0.5 * BOUNDARY_THICKNESS_M))
+
+
+def test_no_kerb_in_a_crack_between_lanelets_narrower_than_the_kerb():
+    # Two lanes that part at an angle (the tip of the gap between lanelets at a diverging
+    # lane): lane A is y in [0, 3.5]; lane B's lower edge rises from (0, 3.5) by 2 cm per
+    # metre. By hand: the crack is as wide as a kerb (0.4 m) at x = 20 m; nearer the tip a
+    # kerb would stand on the other lane. The kerb along A's edge starts there (within one
+    # 0.1 m sample), not at x = -0.2 m, 0.4 m deep into lane B at the tip.
+    spec = RoadSpec(kind="straight", length=100.0, boundary="kerb")
+    lane_a = shapely.box(0.0, 0.0, 100.0, 3.5)
+    lane_b = shapely.Polygon([(0.0, 3.5), (100.0, 5.5), (100.0, 9.0), (0.0, 7.0)])
+    area = shapely.union_all([lane_a, lane_b])
+    edge_a = np.array([[0.0, 3.5], [100.0, 3.5]])
+    edge_b = np.array([[0.0, 3.5], [100.0, 5.5]])
+    road = RoadGeometry(spec, np.array([[0.0, 1.75], [100.0, 1.75]]), None, area, (edge_a, edge_b))
+    kerbs = road.static_boxes()
+    # Along A's edge: the long kerb, and a 0.2 m stub off the road before the crack's tip.
+    stub, kerb_a = sorted((k for k in kerbs if abs(k.yaw) < 1e-9), key=lambda k: k.half_length)
+    assert stub.center[0] + stub.half_length <= 0.0 + 1e-9
+    assert kerb_a.center[0] - kerb_a.half_length == pytest.approx(20.0, abs=0.11)
+    assert kerb_a.center[0] + kerb_a.half_length == pytest.approx(100.0 + 0.5 * BOUNDARY_THICKNESS_M)
+    for kerb in kerbs:  # no kerb reaches more than a few centimetres into either lane
+        assert box_footprint(kerb).intersection(area).area < 0.2 * 0.1
+
+
+def test_a_kerb_ends_at_an_inner_corner_of_the_road():
+    # A side road (x in [40, 50]) leaves the main road (y in [0, 10]) to the left; the main
+    # road's left edge turns up the side road's left edge at (40, 10). By hand: a box runs
+    # t / 2 = 0.2 m past its segment's end to close outer corners, but here that end would
+    # stand in the side road, x in [40, 40.2]: the box ends at x = 40 and the side road's
+    # kerb starts at y = 10 (the two still overlap: the corner stays closed).
+    spec = RoadSpec(kind="straight", length=100.0, boundary="kerb")
+    area = shapely.union_all([shapely.box(0.0, 0.0, 100.0, 10.0), shapely.box(40.0, 10.0, 50.0, 60.0)])
+    edge = np.array([[0.0, 10.0], [40.0, 10.0], [40.0, 60.0]])
+    road = RoadGeometry(spec, np.array([[0.0, 5.0], [100.0, 5.0]]), None, area, (edge,))
+    main, side = road.static_boxes()
+    assert main.center[0] - main.half_length == pytest.approx(-0.5 * BOUNDARY_THICKNESS_M)
+    assert 40.0 - 0.11 < main.center[0] + main.half_length <= 40.0 + 1e-9  # sampled every 0.1 m
+    assert side.center[1] - side.half_length == pytest.approx(10.0)
+    assert side.center[1] + side.half_length == pytest.approx(60.0 + 0.5 * BOUNDARY_THICKNESS_M)
+    assert shapely.union_all([box_footprint(main), box_footprint(side)]).intersection(area).area < 1e-9
