@@ -341,7 +341,12 @@ class RoadGeometry:
         return -normal if road_ahead > road_behind else normal
 
     def static_boxes(self) -> tuple[StaticBox, ...]:
-        """Wall or kerb boxes along the boundaries, just outside the drivable area."""
+        """Wall or kerb boxes along the boundaries, just outside the drivable area.
+
+        Each boundary segment gets a box of thickness ``BOUNDARY_THICKNESS_M`` on its side
+        away from the road, or pieces of it where the road would reach into it
+        (``_off_road_spans``).
+        """
         kind = self.spec.boundary
         if kind is Boundary.NONE:
             return ()
@@ -360,9 +365,7 @@ class RoadGeometry:
                 mid = 0.5 * (a + b)
                 normal = self._outward(mid, np.array([-tangent[1], tangent[0]]))
                 spans = self._off_road_spans(a, tangent, normal, length)
-                if spans == [(-0.5 * t, length + 0.5 * t)]:
-                    spans = [None]  # the whole box, as it always stood
-                for span in spans:
+                for span in [None] if spans is None else spans:
                     if span is None:
                         center, half_length = mid + 0.5 * t * normal, 0.5 * length + 0.5 * t
                     else:
@@ -383,7 +386,7 @@ class RoadGeometry:
 
     def _off_road_spans(
         self, a: np.ndarray, tangent: np.ndarray, normal: np.ndarray, length: float
-    ) -> list[tuple[float, float]]:
+    ) -> list[tuple[float, float]] | None:
         """Where along a boundary segment its box may stand: spans (u0, u1) [m] from ``a``.
 
         A segment's box runs from ``t / 2`` before ``a`` to ``t / 2`` past its end (so
@@ -393,6 +396,9 @@ class RoadGeometry:
         crack between lanelets narrower than the box (the tip of the gap between two
         lanelets that part at an angle, where there is road on the box's far side), nor
         with its end past a sharp inner corner of the road, where it stood in the lane.
+
+        Returns:
+            None where the whole box stands (almost everywhere), else the spans.
         """
         t = BOUNDARY_THICKNESS_M
         n = max(math.ceil((length + t) / BOX_SAMPLE_M), 1) + 1
@@ -401,7 +407,7 @@ class RoadGeometry:
         points = a + u[:, None, None] * tangent + depths[None, :, None] * normal  # (n, k, 2)
         free = ~shapely.contains_xy(self.drivable_area, points[..., 0], points[..., 1]).any(axis=1)
         if free.all():
-            return [(float(u[0]), float(u[-1]))]
+            return None
         edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(np.int8), [0]])))
         spans = [(float(u[i]), float(u[j - 1])) for i, j in zip(edges[::2], edges[1::2], strict=True)]
         return [(u0, u1) for u0, u1 in spans if u1 - u0 >= BOX_SAMPLE_M - 1e-9]
