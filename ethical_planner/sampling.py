@@ -163,9 +163,12 @@ class CandidatePart:
         lon: distinct longitudinal motions, s and its first three time derivatives,
             shape (4, r, n_t).
         lon_row: the motion of each candidate, indices into ``lon``, shape (m,).
-        lat: d and its first three time derivatives of each candidate, shape (4, m, n_t).
+        lat: d and its first three time derivatives of each candidate, shape (4, m, n_t);
+            with ``lat_row``, the distinct lateral motions, shape (4, q, n_t).
         end_speed, end_offset, horizon, deceleration: sampling parameters, shape (m,).
         kind: the family.
+        lat_row: the lateral motion of each candidate, indices into ``lat``, shape (m,);
+            None: ``lat`` holds one per candidate.
     """
 
     lon: np.ndarray
@@ -176,6 +179,7 @@ class CandidatePart:
     horizon: np.ndarray
     kind: CandidateKind
     deceleration: np.ndarray
+    lat_row: np.ndarray | None = None
 
     @property
     def candidate_lon(self) -> np.ndarray:
@@ -406,6 +410,7 @@ def _grid_motion(start: FrenetState, t: np.ndarray, config: SamplingConfig, v_ma
         t,
         row_horizon,
     )
+    lat_row = None  # one lateral motion per candidate
     if v0 < config.low_speed:
         # Werling's low-speed mode: the lateral shift follows the distance travelled.
         at_horizon = np.minimum(np.rint(row_horizon / config.dt).astype(int), len(t) - 1)
@@ -413,15 +418,16 @@ def _grid_motion(start: FrenetState, t: np.ndarray, config: SamplingConfig, v_ma
         lat = lateral_along_arc(start, end_offset, distance[lon_row], lon[:, lon_row])
     else:
         lat_horizon = np.repeat(np.asarray(config.horizons, dtype=float), n_d)
-        lat_rows = _polynomial_derivatives(
+        lat = _polynomial_derivatives(
             quintic_coefficients(start.d, start.d_dot, start.d_ddot, np.tile(d_grid, n_h), lat_horizon),
             t,
             lat_horizon,
         )
         lat_row = (np.arange(n_h)[:, None] * n_d + np.tile(np.arange(n_d), n_v)[None, :]).ravel()
-        lat = lat_rows[:, lat_row]
     zeros = np.zeros(len(horizon))
-    return CandidatePart(lon, lon_row, lat, end_speed, end_offset, horizon, CandidateKind.GRID, zeros)
+    return CandidatePart(
+        lon, lon_row, lat, end_speed, end_offset, horizon, CandidateKind.GRID, zeros, lat_row
+    )
 
 
 def _brake_motion(
@@ -733,12 +739,23 @@ def _assemble(t: np.ndarray, path: ReferencePath, parts: list[CandidatePart]) ->
     lon_rows = np.concatenate([p.lon for p in parts], axis=1)
     offsets = np.cumsum([0] + [p.lon.shape[1] for p in parts[:-1]])
     lon_row = np.concatenate([p.lon_row + offset for p, offset in zip(parts, offsets, strict=True)])
-    lat = np.concatenate([p.lat for p in parts], axis=1)
+    # Each part's lateral motions written once into the whole set's (no gather, then copy).
+    sizes = [p.end_speed.size for p in parts]
+    lat = np.empty((4, sum(sizes), len(t)))
+    first = 0
+    for part, size in zip(parts, sizes, strict=True):  # a few families, not per trajectory
+        if part.lat_row is None:
+            lat[:, first : first + size] = part.lat
+        else:
+            np.take(part.lat, part.lat_row, axis=1, out=lat[:, first : first + size], mode="clip")
+        first += size
     end_speed, end_offset, horizon, deceleration = (
         np.concatenate([getattr(p, name) for p in parts])
         for name in ("end_speed", "end_offset", "horizon", "deceleration")
     )
-    kind = np.concatenate([np.full(p.lat.shape[1], int(p.kind), dtype=np.int8) for p in parts])
+    kind = np.concatenate(
+        [np.full(size, int(p.kind), dtype=np.int8) for p, size in zip(parts, sizes, strict=True)]
+    )
     lon = lon_rows[:, lon_row]
     x, y, yaw, v, a, kappa = cartesian_states(lon_rows, lon_row, lat, path)
     dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
