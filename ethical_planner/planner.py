@@ -858,11 +858,11 @@ class Planner:
         Returns:
             (jerk_lon, jerk_lat, speed deviation, lateral deviation, lanes away).
         """
-        every = every_row(rows, candidates.n_traj)
-        v, d = (candidates.v, candidates.d) if every else (candidates.v[rows], candidates.d[rows])
-        return (
-            candidates.jerk_lon[rows],
-            candidates.jerk_lat[rows],
+        # Row by row: for most of the candidates, every row's values and then those of
+        # ``rows`` are the same numbers, without gathering (n, n_t) arrays first.
+        whole = 2 * rows.size >= candidates.n_traj
+        v, d = (candidates.v, candidates.d) if whole else (candidates.v[rows], candidates.d[rows])
+        terms = (
             np.abs(v - self.desired_speed).mean(axis=1),
             *path_deviation(
                 d,
@@ -871,6 +871,9 @@ class Planner:
                 self.config.weights.path_reference,
             ),
         )
+        if whole and not every_row(rows, candidates.n_traj):
+            terms = tuple(term[rows] for term in terms)
+        return (candidates.jerk_lon[rows], candidates.jerk_lat[rows], *terms)
 
     def _oncoming(self, candidates: Candidates, rows: np.ndarray) -> np.ndarray | None:
         """Mean lanes across the centre line of candidates ``rows`` (``cost.oncoming_lanes``), (m,).
