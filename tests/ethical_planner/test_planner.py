@@ -506,3 +506,33 @@ def test_the_oncoming_lane_costs_more_than_a_lane_of_the_own_direction():
     default = preset("ethical").with_overrides({"commitment": {"enabled": False}})
     one, two = (Planner(default, env).plan(ego, []) for env in (one_way, two_way))
     assert two.costs["mobility"] == one.costs["mobility"]
+
+
+@pytest.mark.parametrize("share", [0.3, 0.7, 1.0])
+def test_risk_free_terms_of_some_rows_are_those_of_the_rows_alone(share):
+    """Comfort's and mobility's inputs of a subset of the candidates, computed over every row
+    and then picked (at least half of them) or over the subset, equal the expressions
+    evaluated on the subset's own arrays, to the bit."""
+    from ethical_planner.cost import path_deviation
+    from ethical_planner.sampling import frenet_state, sample_candidates
+
+    env = RoadEnvironment.along_path([[-20, 0], [200, 0]], lanes_left=1, lanes_right=1, margin=0.5)
+    planner = Planner(preset("ethical"), env)
+    path = env.reference_path
+    start = frenet_state(KinematicState(0.0, 0.8, 0.05, 9.0, 0.4), path)
+    config = planner.config
+    candidates = sample_candidates(start, path, config.sampling, config.vehicle)
+    n = candidates.n_traj
+    rng = np.random.default_rng(5)
+    rows = np.sort(rng.choice(n, int(share * n), replace=False))
+    got = planner._risk_free_terms(candidates, rows)
+    d = candidates.d[rows].copy()
+    expected = (
+        candidates.jerk_lon[rows],
+        candidates.jerk_lat[rows],
+        np.abs(candidates.v[rows].copy() - planner.desired_speed).mean(axis=1),
+        *path_deviation(d, env.lane_offsets, env.lane_width, config.weights.path_reference),
+    )
+    assert len(got) == len(expected)
+    for value, reference in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(value, reference)
