@@ -513,9 +513,6 @@ def close_union(polygons: Sequence[Polygon], gap: float = AREA_GAP_M):  # noqa: 
     return shapely.union_all(grown).buffer(-gap, join_style="mitre")
 
 
-#: A route's stretch outside the drivable area shorter than this (a joint or a sliver
-#: between lanelets) does not end the mapped road [m].
-MAP_GAP_M = 2.0
 #: Spacing of the samples along a route that find where its mapped road ends [m].
 MAP_END_STEP_M = 0.1
 
@@ -523,11 +520,12 @@ MAP_END_STEP_M = 0.1
 def map_end(area: Polygon | MultiPolygon, path: ReferencePath, s_from: float) -> float:
     """Arc length along ``path`` where its mapped road ends [m], or ``inf``.
 
-    The end is where the path, followed from ``s_from``, leaves ``area`` for a stretch
-    of at least ``MAP_GAP_M`` (or for the rest of the path): an imported map's path
-    runs on past its last lanelet (``commonroad.PATH_EXTENSION_M``). Shorter stretches
-    outside are bridged; a path that starts outside the area is followed until it
-    enters. The result lies within ``MAP_END_STEP_M / 2`` of the crossing.
+    The end is where the path, followed from ``s_from``, leaves ``area`` for good: an
+    imported map's path runs on past its last lanelet (``commonroad.PATH_EXTENSION_M``).
+    Every stretch outside after which the path comes back onto the area is bridged,
+    whatever its length (a joint or sliver between lanelets, a junction or median the map
+    leaves out): the map goes on there. A path that starts outside the area is followed
+    until it enters. The result lies within ``MAP_END_STEP_M / 2`` of the crossing.
 
     Args:
         area: the drivable area [m].
@@ -543,15 +541,11 @@ def map_end(area: Polygon | MultiPolygon, path: ReferencePath, s_from: float) ->
     inside = shapely.contains_xy(area, x, y)
     if not inside.any():
         return math.inf
-    entered = int(np.argmax(inside))
-    outside = ~inside[entered:]
-    # Runs of samples outside: starts where outside switches on, ends where it switches off.
-    edges = np.diff(np.concatenate([[0], outside.astype(np.int8), [0]]))
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    for start, end in zip(starts, ends, strict=True):
-        if end == len(outside) or (end - start) * MAP_END_STEP_M >= MAP_GAP_M:
-            return float(s[entered + start]) - 0.5 * MAP_END_STEP_M
-    return math.inf
+    if inside[-1]:
+        return math.inf  # the path ends on the map
+    # The last sample on the area; the stretch after it runs outside to the path's end.
+    last_inside = len(inside) - 1 - int(np.argmax(inside[::-1]))
+    return float(s[last_inside + 1]) - 0.5 * MAP_END_STEP_M
 
 
 def _map_road(spec: RoadSpec) -> RoadGeometry:

@@ -31,12 +31,17 @@ def test_the_map_ends_where_the_path_leaves_the_area_for_good():
     # A 40 m x 4 m road along the path: the path leaves it at x = 40 m.
     road = box(0.0, -2.0, 40.0, 2.0)
     assert map_end(road, STRAIGHT, 5.0) == pytest.approx(40.0, abs=MAP_END_STEP_M)
-    # A 1 m sliver cut across the road (a joint between lanelets) is bridged; a 3 m one
-    # is a gap wider than MAP_GAP_M: the map ends at its start.
+    # A 1 m sliver cut across the road (a joint between lanelets) is bridged, and so is a
+    # 3 m gap (a junction or median the map leaves out): the path comes back onto the
+    # road, so the map goes on; it ends where the path leaves it for good.
     sliver = box(0.0, -2.0, 20.0, 2.0).union(box(21.0, -2.0, 40.0, 2.0))
     assert map_end(sliver, STRAIGHT, 5.0) == pytest.approx(40.0, abs=MAP_END_STEP_M)
     gap = box(0.0, -2.0, 20.0, 2.0).union(box(23.0, -2.0, 40.0, 2.0))
-    assert map_end(gap, STRAIGHT, 5.0) == pytest.approx(20.0, abs=MAP_END_STEP_M)
+    assert map_end(gap, STRAIGHT, 5.0) == pytest.approx(40.0, abs=MAP_END_STEP_M)
+    # A second stretch of road the path crosses 60 m beyond the first one's end: the map
+    # ends only past it.
+    crossing = box(0.0, -2.0, 40.0, 2.0).union(box(100.0, -30.0, 104.0, 30.0))
+    assert map_end(crossing, STRAIGHT, 5.0) == pytest.approx(104.0, abs=MAP_END_STEP_M)
     # A path that starts off the road (an ego on the pavement) is followed until it enters.
     assert map_end(box(10.0, -2.0, 40.0, 2.0), STRAIGHT, 0.0) == pytest.approx(40.0, abs=MAP_END_STEP_M)
     # A road that covers the whole path, or that the path never enters: no end.
