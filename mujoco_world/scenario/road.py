@@ -391,8 +391,9 @@ class RoadGeometry:
 
         A segment's box runs from ``t / 2`` before ``a`` to ``t / 2`` past its end (so
         that boxes close the corners between them) and ``t`` outward. It stands at a
-        cross-section only where the road reaches at most ``BOX_ROAD_TOLERANCE_M`` into
-        it (checked every ``BOX_SAMPLE_M`` at the depths beyond the tolerance): not in a
+        cross-section where the road reaches no sample point at the depths beyond
+        ``BOX_ROAD_TOLERANCE_M`` (0.2, 0.3 and 0.4 m, every ``BOX_SAMPLE_M`` along it; so
+        road up to 0.2 m deep, or a bump narrower than the spacing, can go unseen): not in a
         crack between lanelets narrower than the box (the tip of the gap between two
         lanelets that part at an angle, where there is road on the box's far side), nor
         with its end past a sharp inner corner of the road, where it stood in the lane.
