@@ -68,7 +68,8 @@ GROUP_LABELS = {
 #: Values per group and planner in Fig. 5.
 TOP_N = 100
 #: A goal reached within this time of the start [s] is counted apart in the runs table: the
-#: planning problem put the ego at (or a step from) its goal region, e.g. 11 SinD files.
+#: planning problem put the ego at (or a step from) its goal region (in the shared CommonRoad
+#: files 171 of 792 runs that did not fail: SinD, NGSIM US101 and highD above all).
 QUICK_GOAL_S = 1.0
 
 
